@@ -1,0 +1,171 @@
+//! Feed stage: bytes from a receiver become [`RawFrame`]s.
+//!
+//! Every parser here is a streaming state machine: it accepts input split at
+//! arbitrary points (TCP) or whole datagrams (UDP), never panics, and counts
+//! every byte it could not use in [`FeedStats`] instead of dropping it silently.
+//! Frames are plain `Copy` values with the payload inline so the hot path never
+//! allocates.
+
+pub mod avr;
+pub mod beast;
+pub mod detect;
+pub mod hexlines;
+
+pub use avr::AvrParser;
+pub use beast::BeastParser;
+pub use detect::{detect_format, InputFormat};
+pub use hexlines::HexLineParser;
+
+/// The 48-bit timestamp value some feeders put on frames synthesised from MLAT
+/// results ("MLAT" in ASCII): such frames carry no receiver timing.
+pub const MLAT_MAGIC_TIMESTAMP: u64 = 0xFF00_4D4C_4154;
+
+/// One frame as the receiver heard it.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub struct RawFrame {
+    /// Receiver timestamp (48 bits; 0 when the feed has none).
+    pub timestamp: u64,
+    /// Signal level byte (0 when unknown).
+    pub signal: u8,
+    len: u8,
+    data: [u8; 14],
+}
+
+impl RawFrame {
+    /// Builds a frame from 2 (Mode A/C), 7 (short) or 14 (long) bytes.
+    pub fn new(bytes: &[u8], timestamp: u64, signal: u8) -> Option<Self> {
+        if !matches!(bytes.len(), 2 | 7 | 14) {
+            return None;
+        }
+        let mut data = [0u8; 14];
+        data[..bytes.len()].copy_from_slice(bytes);
+        Some(RawFrame { timestamp, signal, len: bytes.len() as u8, data })
+    }
+
+    #[inline]
+    pub fn bytes(&self) -> &[u8] {
+        &self.data[..self.len as usize]
+    }
+
+    #[inline]
+    pub fn is_mode_ac(&self) -> bool {
+        self.len == 2
+    }
+
+    /// Timestamp is usable for timing (present and not the MLAT marker).
+    pub fn has_timing(&self) -> bool {
+        self.timestamp != 0 && self.timestamp != MLAT_MAGIC_TIMESTAMP
+    }
+
+    /// Upper-case hex of the payload.
+    pub fn hex(&self) -> String {
+        hex_upper(self.bytes())
+    }
+}
+
+/// What a parser hands out.
+#[derive(Clone, Copy, PartialEq, Debug)]
+pub enum FeedEvent {
+    Frame(RawFrame),
+    /// readsb's 0xe3 frame: an 8-byte receiver id that applies to what follows.
+    ReceiverId(u64),
+    /// readsb's 0xe4 frame: the feeder's UUID (36 ASCII characters).
+    ReceiverUuid([u8; 36]),
+    /// Unix time at which the frames that follow arrived, for inputs that
+    /// carry one per line (hex lines with a time column).
+    ArrivalTime(f64),
+}
+
+/// Counters every parser keeps; nothing it skips goes uncounted.
+#[derive(Clone, Copy, Default, Debug, PartialEq, Eq)]
+pub struct FeedStats {
+    pub bytes: u64,
+    pub mode_ac: u64,
+    pub mode_s_short: u64,
+    pub mode_s_long: u64,
+    pub receiver_ids: u64,
+    /// Bytes that belonged to no frame.
+    pub garbage_bytes: u64,
+    /// Frames abandoned part-way (bad escape, bad character, too long).
+    pub broken_frames: u64,
+    /// Frames of a type we recognise but do not use (e.g. Beast status).
+    pub skipped_frames: u64,
+    /// Incomplete frames at the end of a datagram or of the input.
+    pub truncated_frames: u64,
+}
+
+impl FeedStats {
+    pub fn frames(&self) -> u64 {
+        self.mode_ac + self.mode_s_short + self.mode_s_long
+    }
+
+    pub(crate) fn count_frame(&mut self, frame: &RawFrame) {
+        match frame.len {
+            2 => self.mode_ac += 1,
+            7 => self.mode_s_short += 1,
+            _ => self.mode_s_long += 1,
+        }
+    }
+}
+
+/// The common face of the framing parsers, so callers can pick one at run time.
+pub trait FrameParser {
+    /// Feeds a piece of a byte stream; complete frames go to `sink`.
+    fn push(&mut self, input: &[u8], sink: &mut dyn FnMut(FeedEvent));
+    /// End of stream (or of a datagram): an incomplete tail is counted and dropped.
+    fn finish(&mut self, sink: &mut dyn FnMut(FeedEvent));
+    fn stats(&self) -> &FeedStats;
+
+    /// A datagram is a complete unit: parse it and drop any incomplete tail.
+    fn push_datagram(&mut self, datagram: &[u8], sink: &mut dyn FnMut(FeedEvent)) {
+        self.push(datagram, sink);
+        self.finish(sink);
+    }
+}
+
+/// A parser for the given format.
+pub fn parser_for(format: InputFormat) -> Box<dyn FrameParser + Send> {
+    match format {
+        InputFormat::Beast => Box::new(BeastParser::new()),
+        InputFormat::Avr => Box::new(AvrParser::new()),
+        InputFormat::Hex => Box::new(HexLineParser::new()),
+    }
+}
+
+pub(crate) fn hex_upper(bytes: &[u8]) -> String {
+    const DIGITS: &[u8; 16] = b"0123456789ABCDEF";
+    let mut s = String::with_capacity(bytes.len() * 2);
+    for &b in bytes {
+        s.push(DIGITS[(b >> 4) as usize] as char);
+        s.push(DIGITS[(b & 15) as usize] as char);
+    }
+    s
+}
+
+#[inline]
+pub(crate) fn hex_val(c: u8) -> Option<u8> {
+    match c {
+        b'0'..=b'9' => Some(c - b'0'),
+        b'a'..=b'f' => Some(c - b'a' + 10),
+        b'A'..=b'F' => Some(c - b'A' + 10),
+        _ => None,
+    }
+}
+
+/// Decodes an even-length hex string into `out`; `None` on any bad digit.
+pub(crate) fn parse_hex_into(hex: &[u8], out: &mut [u8]) -> Option<usize> {
+    if hex.len() % 2 != 0 || hex.len() / 2 > out.len() {
+        return None;
+    }
+    for (i, pair) in hex.chunks_exact(2).enumerate() {
+        out[i] = (hex_val(pair[0])? << 4) | hex_val(pair[1])?;
+    }
+    Some(hex.len() / 2)
+}
+
+/// Parses a frame hex string (4, 14 or 28 digits).
+pub fn frame_from_hex(hex: &str, timestamp: u64, signal: u8) -> Option<RawFrame> {
+    let mut buf = [0u8; 14];
+    let n = parse_hex_into(hex.trim().as_bytes(), &mut buf)?;
+    RawFrame::new(&buf[..n], timestamp, signal)
+}

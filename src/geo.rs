@@ -1,0 +1,73 @@
+//! Geodesy: WGS-84 constants, geodetic <-> ECEF, and distances.
+//!
+//! Plausibility checks only need a great-circle distance on the mean sphere
+//! (a 0.5% error is irrelevant against a speed limit); geometry that feeds
+//! multilateration uses ECEF on the ellipsoid.
+
+pub const WGS84_A: f64 = 6_378_137.0;
+pub const WGS84_F: f64 = 1.0 / 298.257_223_563;
+pub const WGS84_E2: f64 = WGS84_F * (2.0 - WGS84_F);
+pub const EARTH_MEAN_RADIUS_M: f64 = 6_371_008.8;
+pub const KT_TO_MS: f64 = 1852.0 / 3600.0;
+pub const FT_TO_M: f64 = 0.3048;
+
+/// Great-circle distance (m) on the mean sphere.
+pub fn distance_m(lat1: f64, lon1: f64, lat2: f64, lon2: f64) -> f64 {
+    let (p1, p2) = (lat1.to_radians(), lat2.to_radians());
+    let dp = p2 - p1;
+    let dl = (lon2 - lon1).to_radians();
+    let a = (dp / 2.0).sin().powi(2) + p1.cos() * p2.cos() * (dl / 2.0).sin().powi(2);
+    2.0 * EARTH_MEAN_RADIUS_M * a.sqrt().min(1.0).asin()
+}
+
+/// Geodetic (deg, deg, m above the ellipsoid) to ECEF (m).
+pub fn geodetic_to_ecef(lat: f64, lon: f64, h: f64) -> [f64; 3] {
+    let (sp, cp) = lat.to_radians().sin_cos();
+    let (sl, cl) = lon.to_radians().sin_cos();
+    let n = WGS84_A / (1.0 - WGS84_E2 * sp * sp).sqrt();
+    [(n + h) * cp * cl, (n + h) * cp * sl, (n * (1.0 - WGS84_E2) + h) * sp]
+}
+
+/// ECEF (m) to geodetic (deg, deg, m), by Bowring's method with two refinements
+/// (sub-millimetre for anything between the Earth's centre region and orbit).
+pub fn ecef_to_geodetic(p: [f64; 3]) -> (f64, f64, f64) {
+    let [x, y, z] = p;
+    let lon = y.atan2(x);
+    let r = x.hypot(y);
+    let b = WGS84_A * (1.0 - WGS84_F);
+    let ep2 = (WGS84_A * WGS84_A - b * b) / (b * b);
+    let mut lat = (z * WGS84_A).atan2(r * b);
+    for _ in 0..3 {
+        let beta = ((1.0 - WGS84_F) * lat.tan()).atan();
+        let (sb, cb) = beta.sin_cos();
+        lat = (z + ep2 * b * sb.powi(3)).atan2(r - WGS84_E2 * WGS84_A * cb.powi(3));
+    }
+    let (sp, cp) = lat.sin_cos();
+    let n = WGS84_A / (1.0 - WGS84_E2 * sp * sp).sqrt();
+    let h = if cp.abs() > 1e-10 { r / cp - n } else { z.abs() - b };
+    (lat.to_degrees(), lon.to_degrees(), h)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ecef_round_trip() {
+        for &(lat, lon, h) in
+            &[(0.0, 0.0, 0.0), (43.629, 1.3638, 152.0), (-89.9, 120.0, 11000.0), (59.7, 30.6, 10668.0)]
+        {
+            let (la, lo, hh) = ecef_to_geodetic(geodetic_to_ecef(lat, lon, h));
+            assert!(
+                (la - lat).abs() < 1e-9 && (lo - lon).abs() < 1e-9 && (hh - h).abs() < 1e-4,
+                "{lat} {lon} {h}"
+            );
+        }
+    }
+
+    #[test]
+    fn one_degree_of_latitude() {
+        let d = distance_m(0.0, 0.0, 1.0, 0.0);
+        assert!((d - 111_195.0).abs() < 10.0, "{d}");
+    }
+}
