@@ -10,6 +10,7 @@ pub mod commb;
 pub mod cpr;
 pub mod crc;
 pub mod decoder;
+pub mod encode;
 pub mod fields;
 pub mod json;
 pub mod message;
