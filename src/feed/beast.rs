@@ -124,7 +124,7 @@ impl BeastParser {
         };
         let start = i + 2;
         if let Some(body) = buf.get(start..start + body_len) {
-            if memchr(ESC, body).is_none() {
+            if !contains_esc(body) {
                 self.emit(ty, body, sink);
                 return Step::Next(start + body_len);
             }
@@ -181,6 +181,35 @@ impl BeastParser {
             _ => self.stats.skipped_frames += 1,
         }
     }
+}
+
+/// Whether any byte of a short body (8 to 36 bytes) is 0x1a, eight at a time.
+/// `memchr` is built for long haystacks; on a frame body its set-up costs more
+/// than this whole check.
+#[inline]
+fn contains_esc(b: &[u8]) -> bool {
+    #[inline]
+    fn word_has_esc(w: u64) -> bool {
+        let x = w ^ 0x1a1a_1a1a_1a1a_1a1a;
+        x.wrapping_sub(0x0101_0101_0101_0101) & !x & 0x8080_8080_8080_8080 != 0
+    }
+    #[inline]
+    fn word(b: &[u8], at: usize) -> u64 {
+        u64::from_le_bytes(b[at..at + 8].try_into().expect("8 bytes"))
+    }
+    let n = b.len();
+    if n < 8 {
+        return b.contains(&ESC);
+    }
+    let mut at = 0;
+    while at + 8 <= n {
+        if word_has_esc(word(b, at)) {
+            return true;
+        }
+        at += 8;
+    }
+    // The last, overlapping word covers the tail.
+    at < n && word_has_esc(word(b, n - 8))
 }
 
 impl FrameParser for BeastParser {
@@ -313,6 +342,20 @@ mod tests {
         // The next datagram starts clean: the tail of the previous one is not glued on.
         p.push_datagram(&wire, &mut |e| out.push(e));
         assert_eq!(out.len(), 3);
+    }
+
+    #[test]
+    fn escape_detection_agrees_with_a_plain_scan() {
+        for len in 8..=36 {
+            for pos in 0..len {
+                let mut b = vec![0x55u8; len];
+                assert!(!contains_esc(&b));
+                b[pos] = ESC;
+                assert!(contains_esc(&b), "len {len} pos {pos}");
+                b[pos] = 0x1b;
+                assert!(!contains_esc(&b));
+            }
+        }
     }
 
     #[test]
