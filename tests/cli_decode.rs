@@ -39,6 +39,8 @@ fn decodes_the_real_beast_capture_to_json_lines() {
 
 #[test]
 fn decodes_avr_from_stdin_with_format_detection() {
+    let fixture =
+        std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/frames/published.avr")).unwrap();
     let mut child = fuse1090()
         .args(["decode", "-"])
         .stdin(Stdio::piped())
@@ -46,21 +48,28 @@ fn decodes_avr_from_stdin_with_format_detection() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    child
-        .stdin
-        .take()
-        .unwrap()
-        .write_all(b"*8D4840D6202CC371C32CE0576098;\n*8D485020994409940838175B284F;\n")
-        .unwrap();
+    child.stdin.take().unwrap().write_all(&fixture).unwrap();
     let out = child.wait_with_output().unwrap();
     assert!(out.status.success());
     let lines: Vec<serde_json::Value> =
         String::from_utf8(out.stdout).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines.len(), 9);
     assert_eq!(lines[0]["flight"], "KLM1023");
     assert_eq!(lines[0]["category"], "A0");
-    assert_eq!(lines[1]["gs"], 159.2);
-    assert_eq!(lines[1]["geom_rate"], -832);
-    assert!(lines[1].get("baro_rate").is_none());
+    // The KLM pair decodes, but one global decode is not yet published.
+    assert_eq!(lines[2]["cpr"], "odd");
+    assert!(lines[2].get("lat").is_none());
+    assert_eq!(lines[3]["gs"], 159.2);
+    assert_eq!(lines[3]["geom_rate"], -832);
+    assert!(lines[3].get("baro_rate").is_none());
+    assert_eq!(lines[4]["tas"], 375);
+    assert_eq!(lines[4]["mag_heading"], 243.98);
+    assert_eq!(lines[4]["baro_rate"], -2304);
+    assert_eq!((lines[5]["nac_p"].as_u64(), lines[5]["sil"].as_u64()), (Some(9), Some(3)));
+    assert_eq!(lines[6]["squawk"], "1017");
+    assert_eq!((lines[7]["df"].as_u64(), lines[7]["crc_ok"].as_bool()), (Some(11), Some(true)));
+    // DF0 from an address no verified frame named: decoded, but not trusted.
+    assert_eq!((lines[8]["alt_baro"].as_i64(), lines[8]["crc_ok"].as_bool()), (Some(31000), Some(false)));
 }
 
 #[test]

@@ -282,6 +282,45 @@ mod tests {
     }
 
     #[test]
+    fn emergency_status() {
+        // From the beastblackbox capture: TC 28/1, no emergency, squawk 1017.
+        let m = decode(&bytes("8F400159E1181500000000D94095")).unwrap();
+        let Body::Extended(es) = m.body else { panic!() };
+        assert_eq!(es.kind, Es::Emergency { state: 0, squawk: 0x1017 });
+    }
+
+    #[test]
+    fn df18_control_field() {
+        use crate::modes::encode::set_parity;
+        let mut f = bytes("8D4840D6202CC371C32CE0576098");
+        for (cf, decoded, non_icao) in
+            [(0, true, false), (1, true, true), (2, true, false), (3, false, false), (6, true, false)]
+        {
+            f[0] = (18 << 3) | cf;
+            set_parity(&mut f, 0);
+            let m = decode(&f).unwrap();
+            assert_eq!((m.df, m.parity), (18, Parity::Ok));
+            match m.body {
+                Body::Extended(es) => {
+                    assert!(decoded, "CF {cf}");
+                    assert_eq!(es.non_icao, non_icao);
+                    assert!(matches!(es.kind, Es::Identification { .. }));
+                }
+                _ => assert!(!decoded, "CF {cf}"),
+            }
+        }
+    }
+
+    #[test]
+    fn gnss_height_position() {
+        use crate::modes::encode::{df17, me_airborne_position};
+        let cpr = crate::modes::cpr::encode(10.0, 20.0, false, false);
+        let m = decode(&df17(5, 0x123456, me_airborne_position(20, Some(11_975), 0, cpr))).unwrap();
+        let Body::Extended(es) = m.body else { panic!() };
+        assert!(matches!(es.kind, Es::AirbornePosition { alt_ft: Some(11_975), gnss: true, .. }));
+    }
+
+    #[test]
     fn length_mismatch_and_mode_ac() {
         assert_eq!(decode(&bytes("8D4840D61F3A2B")), Err(FrameError::WrongLength));
         assert_eq!(decode(&bytes("2000")), Err(FrameError::NotModeS));

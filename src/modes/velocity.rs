@@ -94,6 +94,17 @@ mod tests {
     }
 
     #[test]
+    fn supersonic_airspeed_subtype_4() {
+        // Subtype 4: airspeed in 4 kt steps; 0x12C (300) -> (300 - 1) * 4 kt IAS.
+        let me =
+            (19u64 << 51) | (4 << 48) | (1 << 42) | (0x100 << 32) | (0x12C << 21) | (1 << 20) | (17 << 10);
+        let v = decode(me).unwrap();
+        assert_eq!((v.subtype, v.airspeed_kt, v.airspeed_is_tas), (4, Some(1196), false));
+        assert_eq!(v.heading_deg, Some(90.0));
+        assert_eq!(v.vrate_fpm, Some(1024));
+    }
+
+    #[test]
     fn airspeed_subtype_3() {
         // Published example: 8DA05F219B06B6AF189400CBC33F -> 375 kt TAS, 243.98 deg, -2304 ft/min.
         let v = decode(me_of("8DA05F219B06B6AF189400CBC33F")).unwrap();
