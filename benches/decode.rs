@@ -44,7 +44,7 @@ fn synthetic_frames() -> Vec<RawFrame> {
                 me_airborne_position(11, Some(35_000), 0, cpr_encode(lat, 4.0, k % 2 == 1, false)),
             )
             .to_vec(),
-            3 | 4 => df17(5, addr, me_velocity(200.0, -150.0, Some(-640), true, 1)).to_vec(),
+            3 | 4 => df17(5, addr, me_velocity(200.0, -150.0, Some(-640), true, 1, None)).to_vec(),
             5 => df17(5, addr, me_identification(0xA3, "TEST123")).to_vec(),
             6 | 7 => df11(5, addr, 0).to_vec(),
             8 => surveillance_reply(4, 0, ac13_q(35_000).unwrap(), addr, None),

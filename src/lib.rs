@@ -7,6 +7,12 @@
 //! data and tested against truth.
 
 pub mod cmd;
+pub mod config;
+pub mod core;
+pub mod eval;
 pub mod feed;
 pub mod geo;
+pub mod mlat;
 pub mod modes;
+pub mod publish;
+pub mod sim;

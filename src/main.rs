@@ -1,9 +1,11 @@
 //! The `fuse1090` binary: a thin clap front end over the library.
 
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 use fuse1090::cmd;
+use fuse1090::feed::capture::ClockKind;
 use fuse1090::feed::InputFormat;
 
 #[derive(Parser)]
@@ -23,11 +25,43 @@ enum Command {
         /// Receiver position LAT,LON (deg), for surface and local CPR decoding.
         #[arg(long, value_parser = cmd::decode::parse_reference, allow_hyphen_values = true)]
         reference: Option<(f64, f64)>,
-        /// How receiver timestamps count time.
-        #[arg(long, value_enum, default_value = "beast12")]
-        clock: cmd::decode::ClockKind,
+        /// How receiver timestamps count time: beast12 (12 MHz counter) or gps.
+        #[arg(long, default_value = "beast12")]
+        clock: ClockKind,
         /// File to read, or - for stdin (the default).
         input: Option<String>,
+    },
+    /// The pipeline: live from --config, or offline over a capture.
+    Run {
+        /// Configuration file (TOML); built-in defaults without it.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Process this capture offline, driven by its own times.
+        #[arg(long)]
+        capture: Option<PathBuf>,
+        /// Where the offline run writes its event stream (JSON lines).
+        #[arg(long)]
+        output: Option<PathBuf>,
+        /// Also publish per-source (adsb, mlat) tracks.
+        #[arg(long)]
+        source_tracks: bool,
+    },
+    /// Accuracy of a track stream against the truth of a simulation.
+    Eval {
+        #[arg(long)]
+        truth: PathBuf,
+        #[arg(long)]
+        tracks: PathBuf,
+        /// Machine-readable report.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Simulate a scenario: writes DIR/capture.txt and DIR/truth.jsonl.
+    Sim {
+        #[arg(long)]
+        scenario: PathBuf,
+        #[arg(long)]
+        out: PathBuf,
     },
 }
 
@@ -41,6 +75,11 @@ fn main() -> ExitCode {
         Command::Decode { format, reference, clock, input } => {
             cmd::decode::run(cmd::decode::DecodeArgs { format, reference, clock, input })
         }
+        Command::Run { config, capture, output, source_tracks } => {
+            cmd::run::run(cmd::run::RunArgs { config, capture, output, source_tracks })
+        }
+        Command::Sim { scenario, out } => cmd::sim::run(&scenario, &out),
+        Command::Eval { truth, tracks, json } => cmd::eval::run(&truth, &tracks, json),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

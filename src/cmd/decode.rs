@@ -6,27 +6,10 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 
+use crate::feed::capture::ClockKind;
 use crate::feed::{detect_format, parser_for, FeedEvent, InputFormat};
 use crate::modes::json::DecodeRecord;
 use crate::modes::{Decoder, DecoderConfig};
-
-/// How to read receiver timestamps as seconds.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum ClockKind {
-    /// Free-running 12 MHz counter (dump1090/readsb, Beast).
-    Beast12,
-    /// GPS time: seconds of day << 30 | nanoseconds (Radarcape).
-    Gps,
-}
-
-impl ClockKind {
-    pub fn seconds(self, ts: u64) -> f64 {
-        match self {
-            ClockKind::Beast12 => ts as f64 / 12e6,
-            ClockKind::Gps => (ts >> 30) as f64 + (ts & 0x3FFF_FFFF) as f64 * 1e-9,
-        }
-    }
-}
 
 pub struct DecodeArgs {
     pub format: Option<InputFormat>,

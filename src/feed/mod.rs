@@ -8,6 +8,7 @@
 
 pub mod avr;
 pub mod beast;
+pub mod capture;
 pub mod detect;
 pub mod hexlines;
 
@@ -21,7 +22,7 @@ pub use hexlines::HexLineParser;
 pub const MLAT_MAGIC_TIMESTAMP: u64 = 0xFF00_4D4C_4154;
 
 /// One frame as the receiver heard it.
-#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+#[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Debug)]
 pub struct RawFrame {
     /// Receiver timestamp (48 bits; 0 when the feed has none).
     pub timestamp: u64,

@@ -73,6 +73,10 @@ pub struct Decoded {
     pub version: Option<u8>,
     /// Heading in velocity subtypes 3/4 is true, not magnetic (HRD).
     pub heading_true: bool,
+    /// The aircraft's latest NACp (operational status or target state).
+    pub nac_p: Option<u8>,
+    /// The aircraft's latest GNSS-minus-baro altitude difference (ft).
+    pub gnss_baro_diff_ft: Option<i32>,
 }
 
 impl Decoded {
@@ -137,6 +141,8 @@ struct Aircraft {
     nic_c: u8,
     hrd: u8,
     gs_kt: Option<f64>,
+    nac_p: Option<u8>,
+    gnss_baro_diff_ft: Option<i32>,
     even: Option<CprRecord>,
     odd: Option<CprRecord>,
     pos: Option<PosRecord>,
@@ -191,8 +197,19 @@ impl Decoder {
     }
 
     /// Decodes a frame received at time `t` (seconds, any epoch, but one
-    /// clock per decoder).
+    /// clock per decoder), with the configured receiver reference.
     pub fn decode(&mut self, frame: &RawFrame, t: f64) -> Result<Decoded, FrameError> {
+        self.decode_at(frame, t, self.cfg.reference)
+    }
+
+    /// As [`Self::decode`], for a frame heard by a receiver at `reference`
+    /// (several receivers share one decoder in the processing core).
+    pub fn decode_at(
+        &mut self,
+        frame: &RawFrame,
+        t: f64,
+        reference: Option<(f64, f64)>,
+    ) -> Result<Decoded, FrameError> {
         if frame.is_mode_ac() {
             self.stats.mode_ac += 1;
             return Err(FrameError::NotModeS);
@@ -248,12 +265,13 @@ impl Decoder {
             nuc_p: None,
             version: None,
             heading_true: false,
+            nac_p: None,
+            gnss_baro_diff_ft: None,
         };
         if !known {
             return Ok(out);
         }
         let min_reliable = self.cfg.min_reliable;
-        let reference = self.cfg.reference;
         let max_range = self.cfg.max_range_m;
         let ac = self.aircraft.get_mut(&k).expect("known aircraft");
         ac.last_seen = t;
@@ -266,10 +284,17 @@ impl Decoder {
                         ac.nic_c = os.nic_c;
                     }
                     ac.hrd = os.hrd;
+                    if os.version > 0 {
+                        ac.nac_p = Some(os.nac_p);
+                    }
                 }
+                Es::TargetState(ts) => ac.nac_p = Some(ts.nac_p),
                 Es::Velocity(v) => {
                     if let Some(gs) = v.gs_kt() {
                         ac.gs_kt = Some(gs);
+                    }
+                    if v.gnss_baro_diff_ft.is_some() {
+                        ac.gnss_baro_diff_ft = v.gnss_baro_diff_ft;
                     }
                 }
                 Es::AirbornePosition { cpr, nic_b, .. } => {
@@ -290,6 +315,8 @@ impl Decoder {
                 _ => {}
             }
             out.version = ac.version;
+            out.nac_p = ac.nac_p;
+            out.gnss_baro_diff_ft = ac.gnss_baro_diff_ft;
             out.heading_true = ac.version.unwrap_or(0) >= 1 && ac.hrd == 0;
         }
         if let Some(p) = out.position {

@@ -136,8 +136,38 @@ pub fn me_surface_position(tc: u8, movement: u8, track_deg: Option<f64>, cpr: Cp
         | cpr.lon as u64
 }
 
+/// Ground speed (kt) to the surface movement code (DO-260B), the inverse of
+/// the decoder's table: the code whose band holds the speed.
+pub fn movement_code(kt: f64) -> u8 {
+    let code = if kt < 0.125 {
+        1.0
+    } else if kt < 1.0 {
+        2.0 + ((kt - 0.125) / 0.125).floor()
+    } else if kt < 2.0 {
+        9.0 + ((kt - 1.0) / 0.25).floor()
+    } else if kt < 15.0 {
+        13.0 + ((kt - 2.0) / 0.5).floor()
+    } else if kt < 70.0 {
+        39.0 + (kt - 15.0).floor()
+    } else if kt < 100.0 {
+        94.0 + ((kt - 70.0) / 2.0).floor()
+    } else if kt < 175.0 {
+        109.0 + ((kt - 100.0) / 5.0).floor()
+    } else {
+        124.0
+    };
+    code as u8
+}
+
 /// TC 19 subtype 1 (or 2 when supersonic) ground-speed velocity.
-pub fn me_velocity(ve_kt: f64, vn_kt: f64, vrate_fpm: Option<i32>, vrate_baro: bool, nac_v: u8) -> u64 {
+pub fn me_velocity(
+    ve_kt: f64,
+    vn_kt: f64,
+    vrate_fpm: Option<i32>,
+    vrate_baro: bool,
+    nac_v: u8,
+    gnss_baro_diff_ft: Option<i32>,
+) -> u64 {
     let supersonic = ve_kt.abs() > 1021.0 || vn_kt.abs() > 1021.0;
     let scale = if supersonic { 4.0 } else { 1.0 };
     let comp = |v: f64| -> (u64, u64) {
@@ -151,6 +181,10 @@ pub fn me_velocity(ve_kt: f64, vn_kt: f64, vrate_fpm: Option<i32>, vrate_baro: b
         None => (0, 0),
     };
     let subtype = if supersonic { 2 } else { 1 };
+    let (sdiff, diff) = match gnss_baro_diff_ft {
+        Some(d) => ((d < 0) as u64, ((d.unsigned_abs() as f64 / 25.0).round() as u64 + 1).min(127)),
+        None => (0, 0),
+    };
     (19u64 << 51)
         | (subtype << 48)
         | (((nac_v & 7) as u64) << 43)
@@ -161,11 +195,14 @@ pub fn me_velocity(ve_kt: f64, vn_kt: f64, vrate_fpm: Option<i32>, vrate_baro: b
         | ((vrate_baro as u64) << 20)
         | (svr << 19)
         | (vr << 10)
+        | (sdiff << 7)
+        | diff
 }
 
-/// TC 31 airborne operational status (version 1 or 2 layout).
-pub fn me_operational_status(version: u8, nic_a: u8, nac_p: u8, sil: u8) -> u64 {
+/// TC 31 operational status (version 1 or 2 layout), airborne or surface.
+pub fn me_operational_status(surface: bool, version: u8, nic_a: u8, nac_p: u8, sil: u8) -> u64 {
     (31u64 << 51)
+        | ((surface as u64) << 48)
         | (((version & 7) as u64) << 13)
         | (((nic_a & 1) as u64) << 12)
         | (((nac_p & 15) as u64) << 8)
@@ -230,16 +267,34 @@ mod tests {
         assert_eq!((movement_kt, track_deg, c), (Some(5.5), Some(90.0), cpr));
 
         for (ve, vn, vr) in [(-120.0, 300.0, Some(-1280)), (0.0, -80.0, None), (1500.0, 400.0, Some(640))] {
-            let Es::Velocity(v) = es(&df17(5, addr, me_velocity(ve, vn, vr, true, 2))) else { panic!() };
+            let Es::Velocity(v) = es(&df17(5, addr, me_velocity(ve, vn, vr, true, 2, Some(-150)))) else {
+                panic!()
+            };
             let step = if v.subtype == 2 { 4.0 } else { 1.0 };
             assert!((v.ve_kt.unwrap() - ve).abs() <= step && (v.vn_kt.unwrap() - vn).abs() <= step);
             assert_eq!((v.vrate_fpm, v.vrate_baro, v.nac_v), (vr, true, 2));
+            assert_eq!(v.gnss_baro_diff_ft, Some(-150));
         }
 
-        let Es::OperationalStatus(os) = es(&df17(5, addr, me_operational_status(2, 1, 9, 3))) else {
+        let Es::OperationalStatus(os) = es(&df17(5, addr, me_operational_status(false, 2, 1, 9, 3))) else {
             panic!()
         };
-        assert_eq!((os.version, os.nic_a, os.nac_p, os.sil), (2, 1, 9, 3));
+        assert_eq!((os.version, os.nic_a, os.nac_p, os.sil, os.subtype), (2, 1, 9, 3, 0));
+        let Es::OperationalStatus(os) = es(&df17(5, addr, me_operational_status(true, 2, 0, 10, 3))) else {
+            panic!()
+        };
+        assert_eq!((os.subtype, os.nac_p), (1, 10));
+        for kt in [0.0, 0.5, 1.3, 7.2, 33.0, 85.0, 130.0, 200.0] {
+            let code = movement_code(kt);
+            let Es::SurfacePosition { movement_kt, .. } =
+                es(&df17(5, addr, me_surface_position(7, code, None, cpr_encode(1.0, 1.0, false, true))))
+            else {
+                panic!()
+            };
+            let back = movement_kt.unwrap();
+            // Code 124 is "175 kt or more".
+            assert!(back <= kt && (kt - back < 5.0 || back == 175.0), "{kt} -> {code} -> {back}");
+        }
         let Es::TargetState(ts) = es(&df17(5, addr, me_target_state(8, 2))) else { panic!() };
         assert_eq!((ts.nac_p, ts.sil), (8, 2));
     }

@@ -1,0 +1,47 @@
+//! Configuration (TOML). Unknown keys are errors; every field has a default,
+//! so an empty file (or none) is the built-in configuration. Errors carry the
+//! file, line and column that the TOML parser reports.
+
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use serde::Deserialize;
+
+use crate::core::CoreConfig;
+
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Config {
+    pub core: CoreConfig,
+    /// Publish per-source (adsb, mlat) tracks beside the fused ones.
+    pub publish_source_tracks: bool,
+}
+
+impl Config {
+    pub fn load(path: &Path) -> Result<Config> {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+        Self::parse(&text, &path.display().to_string())
+    }
+
+    pub fn parse(text: &str, name: &str) -> Result<Config> {
+        let cfg: Config = toml::from_str(text).map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+        cfg.core.validate().map_err(|e| anyhow::anyhow!("{name}: [core] {e}"))?;
+        Ok(cfg)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_unknown_keys_and_bad_values() {
+        let c = Config::parse("", "empty").unwrap();
+        assert_eq!(c.core.group_wait_s, CoreConfig::default().group_wait_s);
+        let e = Config::parse("[core]\ngroup_wait = 1\n", "x.toml").unwrap_err().to_string();
+        assert!(e.contains("x.toml") && e.contains("line 2") && e.contains("unknown field"), "{e}");
+        let e = Config::parse("[core]\ngroup_wait_s = -1\n", "x.toml").unwrap_err().to_string();
+        assert!(e.contains("group_wait_s"), "{e}");
+    }
+}

@@ -1,0 +1,388 @@
+//! Accuracy against truth: per source and per aircraft, horizontal and
+//! vertical RMSE, 95th percentile error, mean NEES with its 95% chi-square
+//! band, continuity (share of the truth's time covered), track breaks and
+//! false tracks.
+//!
+//! Rows by what produced the record: `track` records by their `source`
+//! (fused, adsb, mlat), `mlat` fixes, and `position` records (decoded ADS-B
+//! reports before tracking) as `adsb-report`.
+
+use std::collections::{BTreeMap, HashMap, HashSet};
+use std::io::BufRead;
+
+use anyhow::{Context, Result};
+use serde::Serialize;
+use serde_json::Value;
+use statrs::distribution::{ChiSquared, ContinuousCDF};
+
+use crate::geo::{WGS84_A, WGS84_E2};
+
+/// A gap in a track is a break when it exceeds this (s) and three times the
+/// track's usual update interval (parked aircraft squitter every 5 s).
+pub const GAP_S: f64 = 5.0;
+/// A track whose mean error exceeds this is counted false (m).
+pub const FALSE_TRACK_M: f64 = 1_000.0;
+
+#[derive(Clone, Copy, Debug)]
+struct TruthPoint {
+    t: f64,
+    lat: f64,
+    lon: f64,
+    alt: f64,
+}
+
+#[derive(Default)]
+pub struct Truth {
+    tracks: HashMap<String, Vec<TruthPoint>>,
+    pub spoofers: HashSet<String>,
+    pub adsb: HashMap<String, bool>,
+}
+
+impl Truth {
+    pub fn read(input: impl BufRead) -> Result<Truth> {
+        let mut truth = Truth::default();
+        for (i, line) in input.lines().enumerate() {
+            let line = line?;
+            if line.trim().is_empty() {
+                continue;
+            }
+            let v: Value = serde_json::from_str(&line).with_context(|| format!("truth line {}", i + 1))?;
+            let hex = v["hex"].as_str().unwrap_or_default().to_uppercase();
+            match v["type"].as_str() {
+                Some("truth") => {
+                    let f = |k: &str| v[k].as_f64().with_context(|| format!("truth line {}: no {k}", i + 1));
+                    truth.tracks.entry(hex).or_default().push(TruthPoint {
+                        t: f("t")?,
+                        lat: f("lat")?,
+                        lon: f("lon")?,
+                        alt: f("alt_m")?,
+                    });
+                }
+                Some("spoof") => {
+                    truth.spoofers.insert(hex);
+                }
+                Some("equipage") => {
+                    truth.adsb.insert(hex, v["adsb"].as_bool().unwrap_or(true));
+                }
+                _ => {}
+            }
+        }
+        for pts in truth.tracks.values_mut() {
+            pts.sort_by(|a, b| a.t.total_cmp(&b.t));
+        }
+        Ok(truth)
+    }
+
+    fn at(&self, hex: &str, t: f64) -> Option<TruthPoint> {
+        let pts = self.tracks.get(hex)?;
+        let i = pts.partition_point(|p| p.t <= t);
+        if i == 0 || i == pts.len() {
+            return pts.get(i.min(pts.len() - 1)).filter(|p| (p.t - t).abs() < 1e-6).copied();
+        }
+        let (a, b) = (pts[i - 1], pts[i]);
+        let f = (t - a.t) / (b.t - a.t);
+        Some(TruthPoint {
+            t,
+            lat: a.lat + (b.lat - a.lat) * f,
+            lon: a.lon + (b.lon - a.lon) * f,
+            alt: a.alt + (b.alt - a.alt) * f,
+        })
+    }
+
+    fn span(&self, hex: &str) -> Option<(f64, f64)> {
+        let pts = self.tracks.get(hex)?;
+        Some((pts.first()?.t, pts.last()?.t))
+    }
+}
+
+/// East/north offset (m) of (lat, lon) from a point.
+fn en_offset(from: &TruthPoint, lat: f64, lon: f64) -> [f64; 2] {
+    let p = from.lat.to_radians();
+    let w = (1.0 - WGS84_E2 * p.sin().powi(2)).sqrt();
+    let n = WGS84_A / w;
+    let m = WGS84_A * (1.0 - WGS84_E2) / (w * w * w);
+    let dlon = ((lon - from.lon + 540.0).rem_euclid(360.0)) - 180.0;
+    [dlon.to_radians() * (n + from.alt) * p.cos(), (lat - from.lat).to_radians() * (m + from.alt)]
+}
+
+#[derive(Default)]
+struct Acc {
+    times: Vec<f64>,
+    h_err: Vec<f64>,
+    v_err: Vec<f64>,
+    nees: Vec<f64>,
+}
+
+/// One row of the report.
+#[derive(Clone, Debug, Serialize)]
+pub struct Row {
+    pub source: String,
+    /// "all" for the overall row.
+    pub hex: String,
+    pub aircraft: usize,
+    pub n: usize,
+    pub h_rmse_m: f64,
+    pub h_p95_m: f64,
+    pub v_rmse_m: Option<f64>,
+    pub nees: Option<f64>,
+    pub nees_band: Option<[f64; 2]>,
+    pub continuity: f64,
+    pub breaks: usize,
+    pub false_tracks: usize,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    pub overall: Vec<Row>,
+    pub aircraft: Vec<Row>,
+    /// Records for addresses the truth does not know.
+    pub unknown_records: usize,
+}
+
+fn rms(v: &[f64]) -> f64 {
+    (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
+}
+
+fn p95(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    s[((s.len() as f64 * 0.95).ceil() as usize).clamp(1, s.len()) - 1]
+}
+
+/// 95% band of the mean of `n` chi-square(2) NEES values.
+pub fn nees_band(n: usize, dof: f64) -> [f64; 2] {
+    let k = n as f64 * dof;
+    let chi = ChiSquared::new(k).expect("positive dof");
+    [chi.inverse_cdf(0.025) / n as f64, chi.inverse_cdf(0.975) / n as f64]
+}
+
+fn coverage(times: &mut [f64], span: (f64, f64)) -> (f64, usize) {
+    times.sort_by(f64::total_cmp);
+    let mut gaps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();
+    let limit = if gaps.is_empty() {
+        GAP_S
+    } else {
+        let mut sorted = gaps.clone();
+        sorted.sort_by(f64::total_cmp);
+        GAP_S.max(3.0 * sorted[sorted.len() / 2])
+    };
+    let mut covered = 0.0;
+    let mut breaks = 0;
+    for gap in gaps.drain(..) {
+        if gap <= limit {
+            covered += gap;
+        } else {
+            breaks += 1;
+        }
+    }
+    let dur = (span.1 - span.0).max(1e-9);
+    ((covered / dur).min(1.0), breaks)
+}
+
+/// Evaluates the records of a track stream against the truth.
+pub fn evaluate(truth: &Truth, records: impl BufRead) -> Result<Report> {
+    // (source, hex, track id) -> accumulated errors.
+    let mut accs: BTreeMap<(String, String, String), Acc> = BTreeMap::new();
+    let mut unknown = 0;
+    for (i, line) in records.lines().enumerate() {
+        let line = line?;
+        if line.trim().is_empty() {
+            continue;
+        }
+        let v: Value = serde_json::from_str(&line).with_context(|| format!("tracks line {}", i + 1))?;
+        let source = match v["type"].as_str() {
+            Some("track") => v["source"].as_str().unwrap_or("fused").to_string(),
+            Some("mlat") => "mlat-fix".to_string(),
+            Some("position") => "adsb-report".to_string(),
+            _ => continue,
+        };
+        let (Some(hex), Some(t), Some(lat), Some(lon)) =
+            (v["hex"].as_str(), v["t"].as_f64(), v["lat"].as_f64(), v["lon"].as_f64())
+        else {
+            continue;
+        };
+        let hex = hex.to_uppercase();
+        // A spoofer's broadcast positions are false by design: keep them apart.
+        let source = if truth.spoofers.contains(&hex) && source.starts_with("adsb") {
+            format!("{source}+spoof")
+        } else {
+            source
+        };
+        let id = v["id"].as_u64().map(|x| x.to_string()).unwrap_or_default();
+        let Some(tp) = truth.at(&hex, t) else {
+            if !truth.tracks.contains_key(&hex) {
+                unknown += 1;
+            }
+            continue;
+        };
+        let e = en_offset(&tp, lat, lon);
+        let acc = accs.entry((source, hex, id)).or_default();
+        acc.times.push(t);
+        acc.h_err.push(e[0].hypot(e[1]));
+        if let Some(alt) = v["alt_m"].as_f64() {
+            acc.v_err.push(alt - tp.alt);
+        }
+        if let Some(c) = v["cov_en"].as_array() {
+            let g = |r: usize, k: usize| c.get(r).and_then(|x| x.get(k)).and_then(Value::as_f64);
+            if let (Some(a), Some(b), Some(cc), Some(d)) = (g(0, 0), g(0, 1), g(1, 0), g(1, 1)) {
+                let det = a * d - b * cc;
+                if det > 0.0 {
+                    acc.nees.push((d * e[0] * e[0] - (b + cc) * e[0] * e[1] + a * e[1] * e[1]) / det);
+                }
+            }
+        }
+    }
+    // Per aircraft rows (tracks of one aircraft merged), then overall per source.
+    let mut per: BTreeMap<(String, String), (Acc, usize)> = BTreeMap::new();
+    for ((source, hex, _id), acc) in accs {
+        let mean_err = acc.h_err.iter().sum::<f64>() / acc.h_err.len().max(1) as f64;
+        let e = per.entry((source, hex)).or_default();
+        e.1 += (mean_err > FALSE_TRACK_M) as usize;
+        e.0.times.extend(acc.times);
+        e.0.h_err.extend(acc.h_err);
+        e.0.v_err.extend(acc.v_err);
+        e.0.nees.extend(acc.nees);
+    }
+    let make_row =
+        |source: &str, hex: &str, aircraft: usize, acc: &Acc, cont: f64, breaks: usize, false_tracks| Row {
+            source: source.to_string(),
+            hex: hex.to_string(),
+            aircraft,
+            n: acc.h_err.len(),
+            h_rmse_m: rms(&acc.h_err),
+            h_p95_m: p95(&acc.h_err),
+            v_rmse_m: (!acc.v_err.is_empty()).then(|| rms(&acc.v_err)),
+            nees: (!acc.nees.is_empty()).then(|| acc.nees.iter().sum::<f64>() / acc.nees.len() as f64),
+            nees_band: (!acc.nees.is_empty()).then(|| nees_band(acc.nees.len(), 2.0)),
+            continuity: cont,
+            breaks,
+            false_tracks,
+        };
+    let mut aircraft_rows = Vec::new();
+    let mut overall: BTreeMap<String, (Acc, usize, f64, usize, usize)> = BTreeMap::new();
+    for ((source, hex), (mut acc, false_tracks)) in per {
+        let span = truth.span(&hex).unwrap_or((0.0, 0.0));
+        let (cont, breaks) = coverage(&mut acc.times, span);
+        aircraft_rows.push(make_row(&source, &hex, 1, &acc, cont, breaks, false_tracks));
+        let o = overall.entry(source).or_default();
+        o.0.h_err.extend(&acc.h_err);
+        o.0.v_err.extend(&acc.v_err);
+        o.0.nees.extend(&acc.nees);
+        o.1 += 1;
+        o.2 += cont;
+        o.3 += breaks;
+        o.4 += false_tracks;
+    }
+    let overall = overall
+        .into_iter()
+        .map(|(source, (acc, n, cont, breaks, ft))| {
+            make_row(&source, "all", n, &acc, cont / n as f64, breaks, ft)
+        })
+        .collect();
+    Ok(Report { overall, aircraft: aircraft_rows, unknown_records: unknown })
+}
+
+fn fmt_opt(v: Option<f64>, prec: usize) -> String {
+    v.map_or("-".into(), |x| format!("{x:.prec$}"))
+}
+
+impl std::fmt::Display for Report {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let header = format!(
+            "{:<18} {:>6} {:>8} {:>9} {:>8} {:>8} {:>7} {:>15} {:>6} {:>6} {:>5}",
+            "source",
+            "hex",
+            "n",
+            "h_rmse_m",
+            "h_p95_m",
+            "v_rmse_m",
+            "nees",
+            "nees_95%",
+            "cont",
+            "breaks",
+            "false"
+        );
+        let line = |r: &Row| {
+            format!(
+                "{:<18} {:>6} {:>8} {:>9.2} {:>8.2} {:>8} {:>7} {:>15} {:>6.3} {:>6} {:>5}",
+                r.source,
+                if r.hex == "all" { format!("{} ac", r.aircraft) } else { r.hex.clone() },
+                r.n,
+                r.h_rmse_m,
+                r.h_p95_m,
+                fmt_opt(r.v_rmse_m, 2),
+                fmt_opt(r.nees, 2),
+                r.nees_band.map_or("-".into(), |b| format!("[{:.2}, {:.2}]", b[0], b[1])),
+                r.continuity,
+                r.breaks,
+                r.false_tracks
+            )
+        };
+        writeln!(f, "{header}")?;
+        for r in &self.overall {
+            writeln!(f, "{}", line(r))?;
+        }
+        if self.aircraft.len() > 1 {
+            writeln!(f, "\nper aircraft:\n{header}")?;
+            for r in &self.aircraft {
+                writeln!(f, "{}", line(r))?;
+            }
+        }
+        if self.unknown_records > 0 {
+            writeln!(f, "\n{} records for addresses not in the truth", self.unknown_records)?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn band_matches_the_chi_square_table() {
+        // One NEES value of 2 dof: the 2.5% and 97.5% points are 0.0506 and 7.378.
+        let b = nees_band(1, 2.0);
+        assert!((b[0] - 0.0506).abs() < 1e-3 && (b[1] - 7.378).abs() < 1e-3, "{b:?}");
+        // Many: the band tightens around 2.
+        let b = nees_band(10_000, 2.0);
+        assert!(b[0] > 1.9 && b[1] < 2.1);
+    }
+
+    #[test]
+    fn errors_nees_and_continuity_against_a_known_offset() {
+        let mut truth_text = String::new();
+        for k in 0..=100 {
+            truth_text += &format!(
+                "{{\"type\":\"truth\",\"hex\":\"ABC123\",\"t\":{},\"lat\":45.0,\"lon\":{},\"alt_m\":1000.0}}\n",
+                1000.0 + k as f64 * 0.1,
+                5.0 + k as f64 * 1e-4
+            );
+        }
+        let truth = Truth::read(truth_text.as_bytes()).unwrap();
+        // Records 100 m north of the truth, claiming a 100 m sigma: NEES = 1 each.
+        let dlat = 100.0 / 111_131.7;
+        let mut recs = String::new();
+        for k in 0..=10 {
+            let t = 1000.0 + k as f64;
+            recs += &format!(
+                "{{\"type\":\"position\",\"hex\":\"abc123\",\"t\":{t},\"lat\":{},\"lon\":{},\"alt_m\":1010.0,\
+                 \"cov_en\":[[10000,0],[0,10000]]}}\n",
+                45.0 + dlat,
+                5.0 + k as f64 * 1e-3
+            );
+        }
+        recs += "{\"type\":\"position\",\"hex\":\"FFFFFF\",\"t\":1000,\"lat\":0,\"lon\":0}\n";
+        let r = evaluate(&truth, recs.as_bytes()).unwrap();
+        let row = &r.overall[0];
+        assert_eq!((row.source.as_str(), row.n), ("adsb-report", 11));
+        assert!((row.h_rmse_m - 100.0).abs() < 0.5, "{}", row.h_rmse_m);
+        assert!((row.v_rmse_m.unwrap() - 10.0).abs() < 1e-6);
+        assert!((row.nees.unwrap() - 1.0).abs() < 0.01);
+        assert!((row.continuity - 1.0).abs() < 1e-9);
+        assert_eq!(r.unknown_records, 1);
+    }
+}

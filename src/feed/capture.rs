@@ -1,0 +1,359 @@
+//! Capture files (contract v1): the one module that reads and writes them.
+//!
+//! ```text
+//! # fuse1090 capture v1
+//! receiver rx1 lat=43.6290 lon=1.3638 alt=152.0 clock=beast12
+//! 1581500000.123456 rx1 <A1B2C3D4E5F6A08D4840D6202CC371C32CE0576098;
+//! ```
+//! A malformed line is reported with its file, line number and reason, then
+//! skipped and counted; reading goes on. Frames reference receivers by index
+//! so the processing core never hashes strings on the hot path.
+
+use std::fmt;
+use std::io::{self, BufRead, Write};
+
+use super::avr::parse_avr_token;
+use super::RawFrame;
+
+/// How a receiver's timestamps count time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ClockKind {
+    /// Free-running 12 MHz counter (dump1090/readsb, Beast).
+    Beast12,
+    /// GPS time of day: seconds of day << 30 | nanoseconds (Radarcape).
+    Gps,
+}
+
+impl ClockKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            ClockKind::Beast12 => "beast12",
+            ClockKind::Gps => "gps",
+        }
+    }
+
+    /// Ticks per second of a counter clock.
+    pub fn frequency_hz(self) -> f64 {
+        match self {
+            ClockKind::Beast12 => 12e6,
+            ClockKind::Gps => 1e9,
+        }
+    }
+
+    /// A timestamp in seconds on the receiver's own scale (counter seconds,
+    /// or seconds of day for GPS).
+    pub fn seconds(self, ts: u64) -> f64 {
+        match self {
+            ClockKind::Beast12 => ts as f64 / 12e6,
+            ClockKind::Gps => (ts >> 30) as f64 + (ts & 0x3FFF_FFFF) as f64 * 1e-9,
+        }
+    }
+
+    /// A GPS timestamp as Unix time, taking the day from `near_unix` (the
+    /// arrival time), across midnight either way.
+    pub fn gps_unix(ts: u64, near_unix: f64) -> f64 {
+        let sod = (ts >> 30) as f64 + (ts & 0x3FFF_FFFF) as f64 * 1e-9;
+        let day = (near_unix / 86_400.0).floor() * 86_400.0;
+        let mut t = day + sod;
+        if t - near_unix > 43_200.0 {
+            t -= 86_400.0;
+        } else if near_unix - t > 43_200.0 {
+            t += 86_400.0;
+        }
+        t
+    }
+
+    /// A Unix time as a GPS timestamp.
+    pub fn gps_timestamp(unix: f64) -> u64 {
+        let sod = unix.rem_euclid(86_400.0);
+        let mut secs = sod.floor() as u64;
+        let mut ns = ((sod - secs as f64) * 1e9).round() as u64;
+        if ns >= 1_000_000_000 {
+            secs += 1;
+            ns -= 1_000_000_000;
+        }
+        ((secs % 86_400) << 30) | ns
+    }
+}
+
+impl std::str::FromStr for ClockKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "beast12" => Ok(ClockKind::Beast12),
+            "gps" => Ok(ClockKind::Gps),
+            _ => Err(format!("unknown clock {s:?} (expected beast12 or gps)")),
+        }
+    }
+}
+
+/// A `receiver` line.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReceiverDecl {
+    pub id: String,
+    pub lat: f64,
+    pub lon: f64,
+    /// Metres above the WGS-84 ellipsoid.
+    pub alt: f64,
+    pub clock: ClockKind,
+}
+
+/// One frame line; `rx` indexes the receivers declared so far.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CaptureFrame {
+    pub arrival: f64,
+    pub rx: usize,
+    pub frame: RawFrame,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub enum CaptureRecord {
+    Receiver(ReceiverDecl),
+    Frame(CaptureFrame),
+}
+
+/// A line that could not be used.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LineError {
+    pub file: String,
+    pub line: usize,
+    pub reason: String,
+}
+
+impl fmt::Display for LineError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}:{}: {}", self.file, self.line, self.reason)
+    }
+}
+
+/// Streaming reader. Iterate it for records; malformed lines are counted in
+/// `skipped` and the first few kept in `errors`.
+pub struct CaptureReader<R> {
+    input: R,
+    file: String,
+    line_no: usize,
+    line: String,
+    receivers: Vec<ReceiverDecl>,
+    pub skipped: u64,
+    pub errors: Vec<LineError>,
+}
+
+/// How many line errors are kept for reporting (all are counted).
+const KEEP_ERRORS: usize = 20;
+
+impl<R: BufRead> CaptureReader<R> {
+    pub fn new(input: R, file: impl Into<String>) -> Self {
+        CaptureReader {
+            input,
+            file: file.into(),
+            line_no: 0,
+            line: String::new(),
+            receivers: Vec::new(),
+            skipped: 0,
+            errors: Vec::new(),
+        }
+    }
+
+    pub fn receivers(&self) -> &[ReceiverDecl] {
+        &self.receivers
+    }
+
+    /// The next record; `Ok(None)` at the end; `Err` only for I/O errors.
+    pub fn next_record(&mut self) -> io::Result<Option<CaptureRecord>> {
+        loop {
+            self.line.clear();
+            if self.input.read_line(&mut self.line)? == 0 {
+                return Ok(None);
+            }
+            self.line_no += 1;
+            let text = self.line.trim();
+            if text.is_empty() || text.starts_with('#') {
+                continue;
+            }
+            match parse_line(text, &self.receivers) {
+                Ok(CaptureRecord::Receiver(r)) => {
+                    if self.receivers.iter().any(|x| x.id == r.id) {
+                        self.skip(format!("receiver {} declared twice", r.id));
+                        continue;
+                    }
+                    self.receivers.push(r.clone());
+                    return Ok(Some(CaptureRecord::Receiver(r)));
+                }
+                Ok(rec) => return Ok(Some(rec)),
+                Err(reason) => self.skip(reason),
+            }
+        }
+    }
+
+    fn skip(&mut self, reason: String) {
+        self.skipped += 1;
+        if self.errors.len() < KEEP_ERRORS {
+            self.errors.push(LineError { file: self.file.clone(), line: self.line_no, reason });
+        }
+    }
+}
+
+fn parse_line(text: &str, receivers: &[ReceiverDecl]) -> Result<CaptureRecord, String> {
+    let mut words = text.split_ascii_whitespace();
+    let first = words.next().unwrap_or("");
+    if first == "receiver" {
+        let id = words.next().ok_or("receiver line without an id")?.to_string();
+        let (mut lat, mut lon, mut alt, mut clock) = (None, None, None, None);
+        for kv in words {
+            let (k, v) = kv.split_once('=').ok_or_else(|| format!("expected key=value, got {kv:?}"))?;
+            let num =
+                || v.parse::<f64>().ok().filter(|x| x.is_finite()).ok_or(format!("bad {k} value {v:?}"));
+            match k {
+                "lat" => lat = Some(num()?).filter(|x| x.abs() <= 90.0),
+                "lon" => lon = Some(num()?).filter(|x| x.abs() <= 180.0),
+                "alt" => alt = Some(num()?),
+                "clock" => clock = Some(v.parse::<ClockKind>()?),
+                _ => return Err(format!("unknown receiver key {k:?}")),
+            }
+        }
+        return Ok(CaptureRecord::Receiver(ReceiverDecl {
+            id,
+            lat: lat.ok_or("receiver needs a valid lat")?,
+            lon: lon.ok_or("receiver needs a valid lon")?,
+            alt: alt.ok_or("receiver needs alt")?,
+            clock: clock.ok_or("receiver needs clock")?,
+        }));
+    }
+    let arrival: f64 = first.parse().ok().filter(|t: &f64| t.is_finite()).ok_or_else(|| {
+        format!(
+            "expected an arrival time or 'receiver', got {:?}",
+            first.chars().take(20).collect::<String>()
+        )
+    })?;
+    let id = words.next().ok_or("frame line without a receiver id")?;
+    let rx =
+        receivers.iter().position(|r| r.id == id).ok_or_else(|| format!("undeclared receiver {id:?}"))?;
+    let token = words.next().ok_or("frame line without a frame")?;
+    if words.next().is_some() {
+        return Err("trailing text after the frame".into());
+    }
+    let token = token.strip_suffix(';').ok_or("frame must end with ';'")?;
+    if !token.starts_with('<') {
+        return Err("frame must be in the '<' form".into());
+    }
+    let frame = parse_avr_token(token.as_bytes()).ok_or("malformed frame")?;
+    Ok(CaptureRecord::Frame(CaptureFrame { arrival, rx, frame }))
+}
+
+/// Writes capture files; frames must come after their receiver's declaration.
+pub struct CaptureWriter<W: Write> {
+    out: W,
+    ids: Vec<String>,
+}
+
+impl<W: Write> CaptureWriter<W> {
+    pub fn new(mut out: W, comment: &str) -> io::Result<Self> {
+        writeln!(out, "# fuse1090 capture v1")?;
+        for line in comment.lines() {
+            writeln!(out, "# {line}")?;
+        }
+        Ok(CaptureWriter { out, ids: Vec::new() })
+    }
+
+    /// Declares a receiver; returns its index for [`Self::frame`].
+    pub fn receiver(&mut self, r: &ReceiverDecl) -> io::Result<usize> {
+        writeln!(
+            self.out,
+            "receiver {} lat={:.8} lon={:.8} alt={:.2} clock={}",
+            r.id,
+            r.lat,
+            r.lon,
+            r.alt,
+            r.clock.name()
+        )?;
+        self.ids.push(r.id.clone());
+        Ok(self.ids.len() - 1)
+    }
+
+    pub fn frame(&mut self, arrival: f64, rx: usize, frame: &RawFrame) -> io::Result<()> {
+        let mut line = [0u8; 80];
+        let mut n = 0;
+        let mut put = |b: &[u8]| {
+            line[n..n + b.len()].copy_from_slice(b);
+            n += b.len();
+        };
+        put(b"<");
+        const HEX: &[u8; 16] = b"0123456789ABCDEF";
+        for shift in (0..12).rev() {
+            put(&[HEX[((frame.timestamp >> (shift * 4)) & 15) as usize]]);
+        }
+        put(&[HEX[(frame.signal >> 4) as usize], HEX[(frame.signal & 15) as usize]]);
+        for &b in frame.bytes() {
+            put(&[HEX[(b >> 4) as usize], HEX[(b & 15) as usize]]);
+        }
+        put(b";");
+        writeln!(
+            self.out,
+            "{arrival:.6} {} {}",
+            self.ids[rx],
+            std::str::from_utf8(&line[..n]).expect("ascii")
+        )
+    }
+
+    pub fn into_inner(self) -> W {
+        self.out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trip_and_bad_lines() {
+        let mut w = CaptureWriter::new(Vec::new(), "test").unwrap();
+        let rx = ReceiverDecl {
+            id: "rx1".into(),
+            lat: 43.629,
+            lon: 1.3638,
+            alt: 152.0,
+            clock: ClockKind::Beast12,
+        };
+        let i = w.receiver(&rx).unwrap();
+        let f = crate::feed::frame_from_hex("8D4840D6202CC371C32CE0576098", 0xA1B2C3D4E5F6, 0xA0).unwrap();
+        w.frame(1581500000.123456, i, &f).unwrap();
+        let mut text = String::from_utf8(w.into_inner()).unwrap();
+        assert!(
+            text.contains("1581500000.123456 rx1 <A1B2C3D4E5F6A08D4840D6202CC371C32CE0576098;"),
+            "{text}"
+        );
+        text += "1581500001.0 rx2 <A1B2C3D4E5F6A08D4840D6202CC371C32CE0576098;\n";
+        text += "garbage here\n";
+        text += "1581500001.0 rx1 <A1B2C3D4E5F6A08D4840D6202CC371C32CE05760;\n";
+        text += "receiver rx1 lat=1 lon=2 alt=3 clock=gps\n";
+        text += "receiver rx9 lat=91 lon=2 alt=3 clock=gps\n";
+        text += "1581500002.5 rx1 <000000000000FF5D4840D61F3A2B;\n";
+        let mut r = CaptureReader::new(text.as_bytes(), "mem.txt");
+        let mut recs = Vec::new();
+        while let Some(x) = r.next_record().unwrap() {
+            recs.push(x);
+        }
+        assert_eq!(recs.len(), 3);
+        assert_eq!(recs[0], CaptureRecord::Receiver(rx));
+        assert_eq!(
+            recs[1],
+            CaptureRecord::Frame(CaptureFrame { arrival: 1581500000.123456, rx: 0, frame: f })
+        );
+        assert_eq!(r.skipped, 5);
+        let reasons: Vec<String> = r.errors.iter().map(|e| e.to_string()).collect();
+        assert!(reasons[0].starts_with("mem.txt:5: undeclared receiver \"rx2\""), "{reasons:?}");
+        assert!(reasons[1].contains("expected an arrival time"));
+        assert!(reasons[2].contains("malformed frame"));
+        assert!(reasons[3].contains("declared twice"));
+        assert!(reasons[4].contains("valid lat"));
+    }
+
+    #[test]
+    fn gps_timestamps_across_midnight() {
+        let t = 1590969599.75; // 23:59:59.75 UTC
+        let ts = ClockKind::gps_timestamp(t);
+        assert!((ClockKind::gps_unix(ts, t + 0.5) - t).abs() < 1e-6);
+        assert!((ClockKind::gps_unix(ClockKind::gps_timestamp(t + 0.5), t) - (t + 0.5)).abs() < 1e-6);
+    }
+}

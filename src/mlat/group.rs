@@ -1,0 +1,170 @@
+//! Grouping: copies of the same transmission (identical bytes) heard by
+//! several receivers, collected for a fixed wait after the first copy arrives.
+//!
+//! The grouper also de-duplicates for the decoder: only the first copy of a
+//! transmission is decoded, the later ones join its group. Pending groups are
+//! bounded; what is dropped is counted.
+
+use std::collections::{HashMap, VecDeque};
+
+use crate::feed::RawFrame;
+
+/// One receiver's copy.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Copy {
+    pub rx: usize,
+    pub timestamp: u64,
+    pub arrival: f64,
+    pub signal: u8,
+}
+
+/// All copies of one transmission.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Group {
+    pub frame: RawFrame,
+    pub first_arrival: f64,
+    pub copies: Vec<Copy>,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct GroupStats {
+    pub groups: u64,
+    pub copies: u64,
+    /// A second copy of one transmission from the same receiver.
+    pub duplicate_copies: u64,
+    /// Groups dropped because too many were pending.
+    pub overflow: u64,
+}
+
+/// What happened to a frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Added {
+    /// First copy: a new transmission.
+    New,
+    /// Joined a pending group.
+    Joined,
+    /// Same receiver, same bytes, still pending: dropped.
+    Duplicate,
+}
+
+pub struct Grouper {
+    wait_s: f64,
+    max_pending: usize,
+    pending: HashMap<u128, usize>,
+    // Groups in first-arrival order; `base` is the sequence number of the front.
+    queue: VecDeque<Group>,
+    base: usize,
+    stats: GroupStats,
+}
+
+fn key(frame: &RawFrame) -> u128 {
+    let b = frame.bytes();
+    let mut k = [0u8; 16];
+    k[..b.len()].copy_from_slice(b);
+    k[15] = b.len() as u8;
+    u128::from_le_bytes(k)
+}
+
+impl Grouper {
+    pub fn new(wait_s: f64, max_pending: usize) -> Self {
+        Grouper {
+            wait_s,
+            max_pending,
+            pending: HashMap::new(),
+            queue: VecDeque::new(),
+            base: 0,
+            stats: GroupStats::default(),
+        }
+    }
+
+    pub fn stats(&self) -> &GroupStats {
+        &self.stats
+    }
+
+    pub fn add(&mut self, rx: usize, arrival: f64, frame: &RawFrame, done: &mut impl FnMut(Group)) -> Added {
+        self.stats.copies += 1;
+        let copy = Copy { rx, timestamp: frame.timestamp, arrival, signal: frame.signal };
+        let k = key(frame);
+        if let Some(&seq) = self.pending.get(&k) {
+            let g = &mut self.queue[seq - self.base];
+            if g.copies.iter().any(|c| c.rx == rx) {
+                self.stats.duplicate_copies += 1;
+                return Added::Duplicate;
+            }
+            g.copies.push(copy);
+            return Added::Joined;
+        }
+        if self.queue.len() >= self.max_pending {
+            self.stats.overflow += 1;
+            self.pop_front(done);
+        }
+        self.stats.groups += 1;
+        self.pending.insert(k, self.base + self.queue.len());
+        self.queue.push_back(Group { frame: *frame, first_arrival: arrival, copies: vec![copy] });
+        Added::New
+    }
+
+    /// Hands out every group whose wait has run out by `now`.
+    pub fn advance(&mut self, now: f64, done: &mut impl FnMut(Group)) {
+        while self.queue.front().is_some_and(|g| g.first_arrival + self.wait_s <= now) {
+            self.pop_front(done);
+        }
+    }
+
+    pub fn flush(&mut self, done: &mut impl FnMut(Group)) {
+        while !self.queue.is_empty() {
+            self.pop_front(done);
+        }
+    }
+
+    fn pop_front(&mut self, done: &mut impl FnMut(Group)) {
+        if let Some(g) = self.queue.pop_front() {
+            self.pending.remove(&key(&g.frame));
+            self.base += 1;
+            done(g);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn f(hex: &str) -> RawFrame {
+        crate::feed::frame_from_hex(hex, 5, 1).unwrap()
+    }
+
+    #[test]
+    fn copies_join_until_the_wait_runs_out() {
+        let mut g = Grouper::new(0.2, 100);
+        let mut out = Vec::new();
+        let a = f("8D4840D6202CC371C32CE0576098");
+        assert_eq!(g.add(0, 10.0, &a, &mut |x| out.push(x)), Added::New);
+        assert_eq!(g.add(1, 10.05, &a, &mut |x| out.push(x)), Added::Joined);
+        assert_eq!(g.add(1, 10.06, &a, &mut |x| out.push(x)), Added::Duplicate);
+        assert_eq!(g.add(2, 10.1, &f("5D4840D61F3A2B"), &mut |x| out.push(x)), Added::New);
+        g.advance(10.19, &mut |x| out.push(x));
+        assert!(out.is_empty());
+        g.advance(10.2, &mut |x| out.push(x));
+        assert_eq!(out.len(), 1);
+        assert_eq!(out[0].copies.len(), 2);
+        // The same bytes after the wait are a new transmission.
+        assert_eq!(g.add(0, 10.7, &a, &mut |x| out.push(x)), Added::New);
+        g.flush(&mut |x| out.push(x));
+        assert_eq!(out.len(), 3);
+        assert_eq!(g.stats().duplicate_copies, 1);
+    }
+
+    #[test]
+    fn pending_groups_are_bounded() {
+        let mut g = Grouper::new(1.0, 2);
+        let mut out = Vec::new();
+        for (i, hex) in ["5D4840D61F3A2B", "5D4840D61F3A2C", "5D4840D61F3A2D"].iter().enumerate() {
+            g.add(0, i as f64 * 0.01, &f(hex), &mut |x| out.push(x));
+        }
+        assert_eq!(out.len(), 1);
+        assert_eq!(g.stats().overflow, 1);
+        // The evicted group's key is gone: its bytes start a new group.
+        assert_eq!(g.add(1, 0.05, &f("5D4840D61F3A2B"), &mut |x| out.push(x)), Added::New);
+    }
+}

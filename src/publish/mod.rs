@@ -1,0 +1,4 @@
+//! Publish stage: events rendered for subscribers ([`json`]: the track stream
+//! of the contract).
+
+pub mod json;
