@@ -35,12 +35,11 @@ pub struct Summary {
     pub elapsed_s: f64,
 }
 
-impl std::fmt::Display for Summary {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "frames={} messages={} aircraft={} fixes={} tracks={} positions={} skipped_lines={} span_s={:.3} \
-             elapsed_s={:.3} rate={:.0}/s",
+impl Summary {
+    /// The part that depends only on the input (no wall-clock figures).
+    pub fn deterministic(&self) -> String {
+        format!(
+            "frames={} messages={} aircraft={} fixes={} tracks={} positions={} skipped_lines={} span_s={:.3}",
             self.frames,
             self.messages,
             self.aircraft,
@@ -48,7 +47,17 @@ impl std::fmt::Display for Summary {
             self.tracks,
             self.positions,
             self.skipped_lines,
-            self.span_s,
+            self.span_s
+        )
+    }
+}
+
+impl std::fmt::Display for Summary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} elapsed_s={:.3} rate={:.0}/s",
+            self.deterministic(),
             self.elapsed_s,
             self.frames as f64 / self.elapsed_s.max(1e-9)
         )

@@ -9,6 +9,7 @@
 //! skipped and counted; reading goes on. Frames reference receivers by index
 //! so the processing core never hashes strings on the hot path.
 
+use std::collections::HashMap;
 use std::fmt;
 use std::io::{self, BufRead, Write};
 
@@ -133,8 +134,9 @@ pub struct CaptureReader<R> {
     input: R,
     file: String,
     line_no: usize,
-    line: String,
+    line: Vec<u8>,
     receivers: Vec<ReceiverDecl>,
+    ids: HashMap<Vec<u8>, usize>,
     pub skipped: u64,
     pub errors: Vec<LineError>,
 }
@@ -148,8 +150,9 @@ impl<R: BufRead> CaptureReader<R> {
             input,
             file: file.into(),
             line_no: 0,
-            line: String::new(),
+            line: Vec::with_capacity(128),
             receivers: Vec::new(),
+            ids: HashMap::new(),
             skipped: 0,
             errors: Vec::new(),
         }
@@ -163,20 +166,29 @@ impl<R: BufRead> CaptureReader<R> {
     pub fn next_record(&mut self) -> io::Result<Option<CaptureRecord>> {
         loop {
             self.line.clear();
-            if self.input.read_line(&mut self.line)? == 0 {
+            if self.input.read_until(b'\n', &mut self.line)? == 0 {
                 return Ok(None);
             }
             self.line_no += 1;
-            let text = self.line.trim();
-            if text.is_empty() || text.starts_with('#') {
+            let text = self.line.trim_ascii();
+            if text.is_empty() || text[0] == b'#' {
                 continue;
             }
-            match parse_line(text, &self.receivers) {
+            let parsed = if text.starts_with(b"receiver") {
+                match std::str::from_utf8(text) {
+                    Ok(t) => parse_receiver(t),
+                    Err(_) => Err("receiver line is not text".to_string()),
+                }
+            } else {
+                parse_frame_line(text, &self.ids)
+            };
+            match parsed {
                 Ok(CaptureRecord::Receiver(r)) => {
-                    if self.receivers.iter().any(|x| x.id == r.id) {
+                    if self.ids.contains_key(r.id.as_bytes()) {
                         self.skip(format!("receiver {} declared twice", r.id));
                         continue;
                     }
+                    self.ids.insert(r.id.as_bytes().to_vec(), self.receivers.len());
                     self.receivers.push(r.clone());
                     return Ok(Some(CaptureRecord::Receiver(r)));
                 }
@@ -194,50 +206,61 @@ impl<R: BufRead> CaptureReader<R> {
     }
 }
 
-fn parse_line(text: &str, receivers: &[ReceiverDecl]) -> Result<CaptureRecord, String> {
+fn parse_receiver(text: &str) -> Result<CaptureRecord, String> {
     let mut words = text.split_ascii_whitespace();
-    let first = words.next().unwrap_or("");
-    if first == "receiver" {
-        let id = words.next().ok_or("receiver line without an id")?.to_string();
-        let (mut lat, mut lon, mut alt, mut clock) = (None, None, None, None);
-        for kv in words {
-            let (k, v) = kv.split_once('=').ok_or_else(|| format!("expected key=value, got {kv:?}"))?;
-            let num =
-                || v.parse::<f64>().ok().filter(|x| x.is_finite()).ok_or(format!("bad {k} value {v:?}"));
-            match k {
-                "lat" => lat = Some(num()?).filter(|x| x.abs() <= 90.0),
-                "lon" => lon = Some(num()?).filter(|x| x.abs() <= 180.0),
-                "alt" => alt = Some(num()?),
-                "clock" => clock = Some(v.parse::<ClockKind>()?),
-                _ => return Err(format!("unknown receiver key {k:?}")),
-            }
-        }
-        return Ok(CaptureRecord::Receiver(ReceiverDecl {
-            id,
-            lat: lat.ok_or("receiver needs a valid lat")?,
-            lon: lon.ok_or("receiver needs a valid lon")?,
-            alt: alt.ok_or("receiver needs alt")?,
-            clock: clock.ok_or("receiver needs clock")?,
-        }));
-    }
-    let arrival: f64 = first.parse().ok().filter(|t: &f64| t.is_finite()).ok_or_else(|| {
-        format!(
+    if words.next() != Some("receiver") {
+        return Err(format!(
             "expected an arrival time or 'receiver', got {:?}",
-            first.chars().take(20).collect::<String>()
-        )
-    })?;
+            text.chars().take(20).collect::<String>()
+        ));
+    }
+    let id = words.next().ok_or("receiver line without an id")?.to_string();
+    let (mut lat, mut lon, mut alt, mut clock) = (None, None, None, None);
+    for kv in words {
+        let (k, v) = kv.split_once('=').ok_or_else(|| format!("expected key=value, got {kv:?}"))?;
+        let num = || v.parse::<f64>().ok().filter(|x| x.is_finite()).ok_or(format!("bad {k} value {v:?}"));
+        match k {
+            "lat" => lat = Some(num()?).filter(|x| x.abs() <= 90.0),
+            "lon" => lon = Some(num()?).filter(|x| x.abs() <= 180.0),
+            "alt" => alt = Some(num()?),
+            "clock" => clock = Some(v.parse::<ClockKind>()?),
+            _ => return Err(format!("unknown receiver key {k:?}")),
+        }
+    }
+    Ok(CaptureRecord::Receiver(ReceiverDecl {
+        id,
+        lat: lat.ok_or("receiver needs a valid lat")?,
+        lon: lon.ok_or("receiver needs a valid lon")?,
+        alt: alt.ok_or("receiver needs alt")?,
+        clock: clock.ok_or("receiver needs clock")?,
+    }))
+}
+
+/// `ARRIVAL ID <FRAME;`, on bytes: this is the hot path of `run --capture`.
+fn parse_frame_line(text: &[u8], ids: &HashMap<Vec<u8>, usize>) -> Result<CaptureRecord, String> {
+    let mut words = text.split(|&b| b == b' ' || b == b'\t').filter(|w| !w.is_empty());
+    let first = words.next().unwrap_or_default();
+    let arrival: f64 = std::str::from_utf8(first)
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .filter(|t: &f64| t.is_finite())
+        .ok_or_else(|| {
+            format!(
+                "expected an arrival time or 'receiver', got {:?}",
+                String::from_utf8_lossy(&first[..first.len().min(20)])
+            )
+        })?;
     let id = words.next().ok_or("frame line without a receiver id")?;
-    let rx =
-        receivers.iter().position(|r| r.id == id).ok_or_else(|| format!("undeclared receiver {id:?}"))?;
+    let rx = *ids.get(id).ok_or_else(|| format!("undeclared receiver {:?}", String::from_utf8_lossy(id)))?;
     let token = words.next().ok_or("frame line without a frame")?;
     if words.next().is_some() {
         return Err("trailing text after the frame".into());
     }
-    let token = token.strip_suffix(';').ok_or("frame must end with ';'")?;
-    if !token.starts_with('<') {
+    let token = token.strip_suffix(b";").ok_or("frame must end with ';'")?;
+    if token.first() != Some(&b'<') {
         return Err("frame must be in the '<' form".into());
     }
-    let frame = parse_avr_token(token.as_bytes()).ok_or("malformed frame")?;
+    let frame = parse_avr_token(token).ok_or("malformed frame")?;
     Ok(CaptureRecord::Frame(CaptureFrame { arrival, rx, frame }))
 }
 

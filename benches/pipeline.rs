@@ -1,0 +1,78 @@
+//! End-to-end offline throughput on `fixtures/scenarios/scale.toml` (200
+//! receivers, 3,000 aircraft), cut to its first 10 s so one iteration stays
+//! around a second: 1.2 M frames.
+//! - `core`: frames already parsed, through the sans-IO core (frames/s);
+//! - `capture`: capture text parsed and run through the core, as `run --capture` does.
+//!
+//! Run: `cargo bench --bench pipeline`.
+
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use fuse1090::core::{Core, CoreConfig};
+use fuse1090::feed::capture::{CaptureReader, CaptureRecord};
+use fuse1090::sim::scenario::Scenario;
+use fuse1090::sim::simulate;
+
+fn capture() -> Vec<u8> {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/scenarios/scale.toml");
+    let mut s = Scenario::load(&path).unwrap();
+    s.duration_s = 10.0;
+    let mut cap = Vec::new();
+    simulate(&s, &mut cap, std::io::sink()).unwrap();
+    cap
+}
+
+fn run(core: &mut Core, text: &[u8]) -> u64 {
+    let mut reader = CaptureReader::new(text, "scale");
+    let mut events = Vec::new();
+    while let Some(rec) = reader.next_record().unwrap() {
+        match rec {
+            CaptureRecord::Receiver(d) => {
+                core.add_receiver(d);
+            }
+            CaptureRecord::Frame(f) => {
+                core.on_frame(f.rx, f.arrival, &f.frame, &mut events);
+                events.clear();
+            }
+        }
+    }
+    core.finish();
+    core.stats().frames
+}
+
+fn bench(c: &mut Criterion) {
+    let text = capture();
+    let mut records = Vec::new();
+    let mut reader = CaptureReader::new(&text[..], "scale");
+    while let Some(r) = reader.next_record().unwrap() {
+        records.push(r);
+    }
+    let frames = records.iter().filter(|r| matches!(r, CaptureRecord::Frame(_))).count() as u64;
+
+    let mut g = c.benchmark_group("pipeline");
+    g.sample_size(10);
+    g.throughput(Throughput::Elements(frames));
+    g.bench_function("core", |b| {
+        b.iter(|| {
+            let mut core = Core::new(&CoreConfig::default());
+            let mut events = Vec::new();
+            for r in &records {
+                match r {
+                    CaptureRecord::Receiver(d) => {
+                        core.add_receiver(d.clone());
+                    }
+                    CaptureRecord::Frame(f) => {
+                        core.on_frame(f.rx, f.arrival, &f.frame, &mut events);
+                        events.clear();
+                    }
+                }
+            }
+            core.finish();
+            core.stats().positions
+        })
+    });
+    g.bench_function("capture", |b| b.iter(|| run(&mut Core::new(&CoreConfig::default()), &text)));
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
