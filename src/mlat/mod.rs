@@ -3,3 +3,4 @@
 //! solver build on the groups.
 
 pub mod group;
+pub mod solver;

@@ -1,0 +1,515 @@
+//! The TDOA solver: where an emitter is, given when several receivers heard it.
+//!
+//! Pseudorange form in ECEF: receiver i measured `rho_i = c * t_i` (metres, in
+//! one common clock), the model is `|p - r_i| + b` with `b` the unknown
+//! emission time times c. An optional altitude pseudo-measurement (the
+//! message's own or a recent Mode S altitude, with an age-inflated sigma)
+//! makes three receivers enough and stabilises weak geometry.
+//!
+//! Start: Bancroft's closed form (4+ receivers; both roots are tried, which
+//! handles the mirror solution) or a caller's guess; then Levenberg-Marquardt
+//! on 4x4 normal equations with nalgebra fixed-size matrices (no heap).
+//! Covariance from the weighted Jacobian at the solution, scaled by the
+//! residual chi-square when that exceeds its degrees of freedom, so a fix
+//! never claims more than its own residuals support.
+
+use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
+
+use crate::geo::{ecef_to_geodetic, geodetic_to_ecef};
+
+/// Speed of light in air (the simulator's and the solver's; refractive index 1.0003).
+pub const C_AIR: f64 = 299_792_458.0 / 1.0003;
+
+/// One receiver's measurement.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Measurement {
+    pub pos: [f64; 3],
+    /// Time of arrival in the common clock (s), relative to any epoch shared by the group.
+    pub t: f64,
+    /// 1-sigma timing error (s).
+    pub sigma_t: f64,
+}
+
+/// Height above the ellipsoid (m) with its 1-sigma.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AltitudeConstraint {
+    pub h_m: f64,
+    pub sigma_m: f64,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SolverLimits {
+    /// Reject fixes whose residual chi-square exceeds this quantile's value.
+    pub chi2_quantile: f64,
+    pub max_iterations: usize,
+    /// Farther than this from every receiver (m): reject.
+    pub max_range_m: f64,
+    pub min_height_m: f64,
+    pub max_height_m: f64,
+    /// Largest horizontal dilution of precision accepted.
+    pub max_gdop: f64,
+}
+
+impl Default for SolverLimits {
+    fn default() -> Self {
+        SolverLimits {
+            chi2_quantile: 0.999,
+            max_iterations: 20,
+            max_range_m: 500_000.0,
+            min_height_m: -1_000.0,
+            max_height_m: 25_000.0,
+            max_gdop: 50.0,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Fix {
+    pub ecef: [f64; 3],
+    pub lat: f64,
+    pub lon: f64,
+    pub h_m: f64,
+    /// Emission time in the common clock (s).
+    pub t_emit: f64,
+    /// Position covariance (ECEF, m^2).
+    pub cov_ecef: [[f64; 3]; 3],
+    /// Horizontal covariance in the local east/north plane (m^2).
+    pub cov_en: [[f64; 2]; 2],
+    /// Residual chi-square and its degrees of freedom.
+    pub chi2: f64,
+    pub dof: usize,
+    /// Geometric dilution of precision (3-D position, in units of the timing sigma).
+    pub gdop: f64,
+    pub iterations: usize,
+}
+
+/// Why no fix.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Reject {
+    TooFewMeasurements,
+    Diverged,
+    Singular,
+    Residual,
+    Range,
+    Height,
+    Gdop,
+}
+
+impl Reject {
+    pub const ALL: [Reject; 7] = [
+        Reject::TooFewMeasurements,
+        Reject::Diverged,
+        Reject::Singular,
+        Reject::Residual,
+        Reject::Range,
+        Reject::Height,
+        Reject::Gdop,
+    ];
+    pub fn name(self) -> &'static str {
+        match self {
+            Reject::TooFewMeasurements => "too_few",
+            Reject::Diverged => "diverged",
+            Reject::Singular => "singular",
+            Reject::Residual => "residual",
+            Reject::Range => "range",
+            Reject::Height => "height",
+            Reject::Gdop => "gdop",
+        }
+    }
+}
+
+/// Upper unit normal of the ellipsoid at a point (the gradient of height).
+fn up(lat: f64, lon: f64) -> Vector3<f64> {
+    let (sp, cp) = lat.to_radians().sin_cos();
+    let (sl, cl) = lon.to_radians().sin_cos();
+    Vector3::new(cp * cl, cp * sl, sp)
+}
+
+struct Normal {
+    a: Matrix4<f64>,
+    g: Vector4<f64>,
+    chi2: f64,
+}
+
+/// Normal equations and chi-square at state `x = (p, b)`.
+fn normal(x: &Vector4<f64>, ms: &[Measurement], t0: f64, alt: Option<AltitudeConstraint>) -> Normal {
+    let p = x.fixed_rows::<3>(0).into_owned();
+    let mut a = Matrix4::zeros();
+    let mut g = Vector4::zeros();
+    let mut chi2 = 0.0;
+    for m in ms {
+        let d = p - Vector3::from(m.pos);
+        let r = d.norm().max(1.0);
+        let rho = C_AIR * (m.t - t0);
+        let res = rho - r - x[3];
+        let w = 1.0 / (C_AIR * m.sigma_t).powi(2);
+        let j = Vector4::new(d[0] / r, d[1] / r, d[2] / r, 1.0);
+        a += w * j * j.transpose();
+        g += w * res * j;
+        chi2 += w * res * res;
+    }
+    if let Some(c) = alt {
+        let (lat, lon, h) = ecef_to_geodetic([p[0], p[1], p[2]]);
+        let u = up(lat, lon);
+        let res = c.h_m - h;
+        let w = 1.0 / (c.sigma_m * c.sigma_m);
+        let j = Vector4::new(u[0], u[1], u[2], 0.0);
+        a += w * j * j.transpose();
+        g += w * res * j;
+        chi2 += w * res * res;
+    }
+    Normal { a, g, chi2 }
+}
+
+/// Bancroft's closed form: both candidate states (p, b) for 4+ pseudoranges.
+fn bancroft(ms: &[Measurement], t0: f64) -> [Option<Vector4<f64>>; 2] {
+    let lorentz = |u: &Vector4<f64>, v: &Vector4<f64>| u[0] * v[0] + u[1] * v[1] + u[2] * v[2] - u[3] * v[3];
+    // Rows [s_i, -rho_i]; B+ = (B^T W B)^-1 B^T W, with the receivers' weights.
+    let mut btb = Matrix4::zeros();
+    let mut bte = Vector4::zeros();
+    let mut bta = Vector4::zeros();
+    for m in ms {
+        let rho = C_AIR * (m.t - t0);
+        let row = Vector4::new(m.pos[0], m.pos[1], m.pos[2], -rho);
+        let w = 1.0 / (m.sigma_t * 1e9).powi(2);
+        let a = 0.5 * lorentz(&row, &row);
+        btb += w * row * row.transpose();
+        bte += w * row;
+        bta += w * a * row;
+    }
+    let Some(inv) = btb.try_inverse() else { return [None, None] };
+    let (u, v) = (inv * bte, inv * bta);
+    let (qa, qb, qc) = (lorentz(&u, &u), 2.0 * (lorentz(&u, &v) - 1.0), lorentz(&v, &v));
+    let disc = qb * qb - 4.0 * qa * qc;
+    if disc < 0.0 || qa.abs() < 1e-300 {
+        return [None, None];
+    }
+    let s = disc.sqrt();
+    let root = |l: f64| {
+        let y = v + l * u;
+        // y = (p, b) with b defined by rho = |p - s| + b.
+        Some(Vector4::new(y[0], y[1], y[2], y[3]))
+    };
+    [root((-qb + s) / (2.0 * qa)), root((-qb - s) / (2.0 * qa))]
+}
+
+/// Chi-square quantile for small degrees of freedom (Wilson-Hilferty; within
+/// a few percent for dof >= 1 at the tail quantiles used here).
+pub fn chi2_quantile(dof: usize, q: f64) -> f64 {
+    let k = dof.max(1) as f64;
+    // Standard normal quantile by Acklam's rational approximation (tail part suffices here).
+    let z = {
+        let p = q.clamp(1e-12, 1.0 - 1e-12);
+        let t = (-2.0 * (1.0 - p).ln()).sqrt();
+        t - (2.515_517 + 0.802_853 * t + 0.010_328 * t * t)
+            / (1.0 + 1.432_788 * t + 0.189_269 * t * t + 0.001_308 * t.powi(3))
+    };
+    let h = 2.0 / (9.0 * k);
+    k * (1.0 - h + z * h.sqrt()).powi(3)
+}
+
+/// Solves for the emitter. `guess` (ECEF) is tried first when given.
+pub fn solve(
+    ms: &[Measurement],
+    alt: Option<AltitudeConstraint>,
+    guess: Option<[f64; 3]>,
+    limits: &SolverLimits,
+) -> Result<Fix, Reject> {
+    let n = ms.len() + alt.is_some() as usize;
+    if ms.len() < 3 || n < 4 {
+        return Err(Reject::TooFewMeasurements);
+    }
+    // Work relative to the earliest arrival so pseudoranges stay small.
+    let t0 = ms.iter().map(|m| m.t).fold(f64::INFINITY, f64::min);
+    let mut starts: [Option<Vector4<f64>>; 4] = [None; 4];
+    let b_for = |p: Vector3<f64>| {
+        // Emission offset that best matches the measurements from p.
+        let mut s = 0.0;
+        for m in ms {
+            s += C_AIR * (m.t - t0) - (p - Vector3::from(m.pos)).norm();
+        }
+        s / ms.len() as f64
+    };
+    if let Some(g) = guess {
+        let p = Vector3::from(g);
+        starts[0] = Some(Vector4::new(p[0], p[1], p[2], b_for(p)));
+    }
+    if ms.len() >= 4 {
+        let [a, b] = bancroft(ms, t0);
+        starts[1] = a;
+        starts[2] = b;
+    }
+    {
+        // Centroid of the receivers, lifted to the constrained altitude or 10 km.
+        let mut c = Vector3::zeros();
+        for m in ms {
+            c += Vector3::from(m.pos);
+        }
+        c /= ms.len() as f64;
+        let (lat, lon, _) = ecef_to_geodetic([c[0], c[1], c[2]]);
+        let h = alt.map_or(10_000.0, |a| a.h_m);
+        let p = Vector3::from(geodetic_to_ecef(lat, lon, h));
+        starts[3] = Some(Vector4::new(p[0], p[1], p[2], b_for(p)));
+    }
+    let dof = n - 4;
+    let chi2_limit = if dof > 0 { chi2_quantile(dof, limits.chi2_quantile) } else { f64::INFINITY };
+    let mut best: Option<(Vector4<f64>, Normal, usize)> = None;
+    let mut saw_failure = false;
+    for start in starts.into_iter().flatten() {
+        if !start.iter().all(|v| v.is_finite()) {
+            continue;
+        }
+        match refine(start, ms, t0, alt, limits.max_iterations) {
+            Some((x, nrm, it)) => {
+                if best.as_ref().is_none_or(|b| nrm.chi2 < b.1.chi2) {
+                    best = Some((x, nrm, it));
+                }
+                // A clean fit from a good start needs no second opinion.
+                if best.as_ref().is_some_and(|b| b.1.chi2 <= chi2_limit * 0.5 || dof == 0) && guess.is_some()
+                {
+                    break;
+                }
+            }
+            None => saw_failure = true,
+        }
+    }
+    let Some((x, nrm, iterations)) = best else {
+        return Err(if saw_failure { Reject::Diverged } else { Reject::Singular });
+    };
+    if nrm.chi2 > chi2_limit {
+        return Err(Reject::Residual);
+    }
+    let p = [x[0], x[1], x[2]];
+    let (lat, lon, h) = ecef_to_geodetic(p);
+    if !(limits.min_height_m..=limits.max_height_m).contains(&h) {
+        return Err(Reject::Height);
+    }
+    let nearest =
+        ms.iter().map(|m| (Vector3::from(p) - Vector3::from(m.pos)).norm()).fold(f64::INFINITY, f64::min);
+    if nearest > limits.max_range_m {
+        return Err(Reject::Range);
+    }
+    let Some(cov4) = scaled_inverse(&nrm.a) else { return Err(Reject::Singular) };
+    // Scale by the residual when it says the sigmas were optimistic (beyond
+    // what chance explains), so an honest fix keeps an unbiased covariance.
+    let scale = if dof > 0 && nrm.chi2 > chi2_quantile(dof, 0.9) { nrm.chi2 / dof as f64 } else { 1.0 };
+    let cov3: Matrix3<f64> = cov4.fixed_view::<3, 3>(0, 0).into_owned() * scale;
+    let mean_sigma_m = {
+        let s: f64 = ms.iter().map(|m| 1.0 / (C_AIR * m.sigma_t).powi(2)).sum::<f64>() / ms.len() as f64;
+        1.0 / s.sqrt()
+    };
+    let gdop = (cov4.fixed_view::<3, 3>(0, 0).trace()).sqrt() / mean_sigma_m;
+    // East/north basis at the fix.
+    let (sp, cp) = lat.to_radians().sin_cos();
+    let (sl, cl) = lon.to_radians().sin_cos();
+    let e = Vector3::new(-sl, cl, 0.0);
+    let nn = Vector3::new(-sp * cl, -sp * sl, cp);
+    let cen = [
+        [(e.transpose() * cov3 * e)[0], (e.transpose() * cov3 * nn)[0]],
+        [(nn.transpose() * cov3 * e)[0], (nn.transpose() * cov3 * nn)[0]],
+    ];
+    // Geometry limit on the horizontal part (height is usually constrained).
+    let hdop = ((cen[0][0] + cen[1][1]) / scale).sqrt() / mean_sigma_m;
+    if !hdop.is_finite() || hdop > limits.max_gdop {
+        return Err(Reject::Gdop);
+    }
+    let mut cov_ecef = [[0.0; 3]; 3];
+    for (r, row) in cov_ecef.iter_mut().enumerate() {
+        for (c, v) in row.iter_mut().enumerate() {
+            *v = cov3[(r, c)];
+        }
+    }
+    Ok(Fix {
+        ecef: p,
+        lat,
+        lon,
+        h_m: h,
+        t_emit: t0 + x[3] / C_AIR,
+        cov_ecef,
+        cov_en: cen,
+        chi2: nrm.chi2,
+        dof,
+        gdop,
+        iterations,
+    })
+}
+
+/// Solves `a x = g` after Jacobi scaling: pseudorange weights (1e6 and more)
+/// and an altitude weight (1e-4) in one matrix defeat a plain Cholesky.
+fn scaled_solve(a: &Matrix4<f64>, g: &Vector4<f64>) -> Option<Vector4<f64>> {
+    let d = Vector4::from_fn(|i, _| 1.0 / a[(i, i)].max(1e-300).sqrt());
+    let s = Matrix4::from_fn(|r, c| a[(r, c)] * d[r] * d[c]);
+    let y = s.cholesky()?.solve(&g.component_mul(&d));
+    Some(y.component_mul(&d))
+}
+
+/// Inverse of a symmetric positive definite matrix, Jacobi-scaled like [`scaled_solve`].
+fn scaled_inverse(a: &Matrix4<f64>) -> Option<Matrix4<f64>> {
+    let d = Vector4::from_fn(|i, _| 1.0 / a[(i, i)].max(1e-300).sqrt());
+    let s = Matrix4::from_fn(|r, c| a[(r, c)] * d[r] * d[c]);
+    let inv = s.cholesky()?.inverse();
+    Some(Matrix4::from_fn(|r, c| inv[(r, c)] * d[r] * d[c]))
+}
+
+/// Levenberg-Marquardt from `x`.
+fn refine(
+    mut x: Vector4<f64>,
+    ms: &[Measurement],
+    t0: f64,
+    alt: Option<AltitudeConstraint>,
+    max_iterations: usize,
+) -> Option<(Vector4<f64>, Normal, usize)> {
+    let mut cur = normal(&x, ms, t0, alt);
+    let mut lambda = 1e-6;
+    for it in 1..=max_iterations {
+        let mut a = cur.a;
+        for k in 0..4 {
+            a[(k, k)] *= 1.0 + lambda;
+        }
+        let step = scaled_solve(&a, &cur.g)?;
+        if !step.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let cand = x + step;
+        let next = normal(&cand, ms, t0, alt);
+        // Converged: a millimetre step. Checked before acceptance, because at
+        // the optimum chi-square only wobbles in its last digits.
+        if step.fixed_rows::<3>(0).norm() < 1e-3 {
+            return Some(if next.chi2 <= cur.chi2 { (cand, next, it) } else { (x, cur, it) });
+        }
+        if next.chi2 <= cur.chi2 {
+            // Also converged: the fit no longer improves (inconsistent data
+            // settles at its least-squares optimum without millimetre steps).
+            let stalled =
+                cur.chi2 - next.chi2 <= 1e-9 * cur.chi2.max(1e-12) && step.fixed_rows::<3>(0).norm() < 1.0;
+            x = cand;
+            cur = next;
+            lambda = (lambda * 0.1).max(1e-12);
+            if stalled {
+                return Some((x, cur, it));
+            }
+        } else {
+            lambda *= 10.0;
+            if lambda > 1e8 {
+                return Some((x, cur, it));
+            }
+        }
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr::{Distribution, Normal as Gauss};
+
+    fn receivers() -> Vec<[f64; 3]> {
+        [
+            (43.98, 1.61, 150.0),
+            (43.60, 2.05, 170.0),
+            (43.20, 1.70, 190.0),
+            (43.25, 1.10, 210.0),
+            (43.70, 0.90, 230.0),
+            (44.05, 1.20, 250.0),
+        ]
+        .iter()
+        .map(|&(la, lo, h)| geodetic_to_ecef(la, lo, h))
+        .collect()
+    }
+
+    fn measure(rx: &[[f64; 3]], target: [f64; 3], sigma: f64, rng: &mut ChaCha8Rng) -> Vec<Measurement> {
+        let g = Gauss::new(0.0, sigma).unwrap();
+        rx.iter()
+            .map(|&r| {
+                let d = (Vector3::from(target) - Vector3::from(r)).norm();
+                Measurement { pos: r, t: 1000.0 + d / C_AIR + g.sample(rng), sigma_t: sigma }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn exact_measurements_give_the_exact_position() {
+        let rx = receivers();
+        let target = geodetic_to_ecef(43.55, 1.40, 3000.0);
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let ms = measure(&rx, target, 1e-10, &mut rng);
+        let f = solve(&ms, None, None, &SolverLimits::default()).unwrap();
+        // 3 cm timing: centimetres horizontally; height is weakly observed
+        // from the ground (vertical DOP about 125) and must sit inside its sigma.
+        let (lat, lon, h) = (f.lat, f.lon, f.h_m);
+        let d = crate::geo::distance_m(lat, lon, 43.55, 1.40);
+        assert!(d < 0.2, "{d}");
+        let sigma_h = (f.cov_ecef[0][0] + f.cov_ecef[1][1] + f.cov_ecef[2][2]).sqrt();
+        assert!((h - 3000.0).abs() < 4.0 * sigma_h, "{h} {sigma_h}");
+        assert!((f.t_emit - 1000.0).abs() < 1e-7);
+        assert_eq!(f.dof, 2);
+    }
+
+    #[test]
+    fn covariance_is_consistent_and_errors_match_it() {
+        // Monte Carlo: NEES of the 3-D position averages 3, and horizontal
+        // RMSE matches the reported covariance.
+        let rx = receivers();
+        let target = geodetic_to_ecef(43.55, 1.40, 3000.0);
+        let mut rng = ChaCha8Rng::seed_from_u64(2);
+        let (mut nees, mut se, mut tr) = (0.0, 0.0, 0.0);
+        let (mut n, mut rejected) = (0, 0);
+        let alt_noise = Gauss::new(0.0, 30.0).unwrap();
+        for _ in 0..2000 {
+            let ms = measure(&rx, target, 50e-9, &mut rng);
+            let alt = AltitudeConstraint { h_m: 3000.0 + alt_noise.sample(&mut rng), sigma_m: 30.0 };
+            let Ok(f) = solve(&ms, Some(alt), None, &SolverLimits::default()) else {
+                rejected += 1;
+                continue;
+            };
+            n += 1;
+            let e = Vector3::from(f.ecef) - Vector3::from(target);
+            let c = Matrix3::from_fn(|r, k| f.cov_ecef[r][k]);
+            nees += (e.transpose() * c.try_inverse().unwrap() * e)[0];
+            se += e.norm_squared();
+            tr += c.trace();
+        }
+        // The chi-square test at 0.999 rejects about 0.1% of honest fixes.
+        assert!(rejected <= 10, "{rejected}");
+        let nees = nees / n as f64;
+        // 3-D NEES averages 3 (the 10% of fixes with the largest residuals
+        // get an inflated covariance, which pulls it a little below).
+        assert!(nees > 2.6 && nees < 3.2, "{nees}");
+        assert!(se / tr > 0.8 && se / tr < 1.1, "{}", se / tr);
+    }
+
+    #[test]
+    fn three_receivers_with_altitude_and_the_mirror() {
+        let rx = receivers();
+        let target = geodetic_to_ecef(43.55, 1.40, 9000.0);
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let ms = measure(&rx[..3], target, 1e-10, &mut rng);
+        let alt = AltitudeConstraint { h_m: 9000.0, sigma_m: 10.0 };
+        assert_eq!(solve(&ms, None, None, &SolverLimits::default()).unwrap_err(), Reject::TooFewMeasurements);
+        let f = solve(&ms, Some(alt), None, &SolverLimits::default()).unwrap();
+        assert!((Vector3::from(f.ecef) - Vector3::from(target)).norm() < 1.0);
+        assert_eq!(f.dof, 0);
+    }
+
+    #[test]
+    fn inconsistent_times_are_rejected() {
+        let rx = receivers();
+        let target = geodetic_to_ecef(43.55, 1.40, 3000.0);
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let mut ms = measure(&rx, target, 50e-9, &mut rng);
+        ms[2].t += 3e-6; // a receiver 900 m off in range
+        let alt = AltitudeConstraint { h_m: 3000.0, sigma_m: 30.0 };
+        assert_eq!(solve(&ms, Some(alt), None, &SolverLimits::default()).unwrap_err(), Reject::Residual);
+    }
+
+    #[test]
+    fn chi2_quantiles() {
+        // Table values: 0.999 quantiles for 1, 2, 5, 10 dof: 10.83, 13.82, 20.52, 29.59.
+        for (k, v) in [(1, 10.83), (2, 13.82), (5, 20.52), (10, 29.59)] {
+            let q = chi2_quantile(k, 0.999);
+            assert!((q / v - 1.0).abs() < 0.06, "{k}: {q}");
+        }
+    }
+}
