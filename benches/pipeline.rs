@@ -35,7 +35,7 @@ fn run(core: &mut Core, text: &[u8]) -> u64 {
             }
         }
     }
-    core.finish();
+    core.finish(&mut events);
     core.stats().frames
 }
 
@@ -66,7 +66,7 @@ fn bench(c: &mut Criterion) {
                     }
                 }
             }
-            core.finish();
+            core.finish(&mut events);
             core.stats().positions
         })
     });

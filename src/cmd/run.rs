@@ -115,7 +115,7 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
             }
         }
     }
-    core.finish();
+    core.finish(&mut events);
     flush(&mut events, &ids, &mut out)?;
     out.flush().context("writing output")?;
     for e in &reader.errors {
@@ -129,7 +129,7 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
         frames: s.frames,
         messages: s.messages,
         aircraft: core.decoder().stats().aircraft_created,
-        fixes: 0,
+        fixes: s.fixes,
         tracks: 0,
         positions: s.positions,
         skipped_lines: reader.skipped,

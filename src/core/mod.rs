@@ -14,8 +14,10 @@ use serde::Deserialize;
 
 use crate::feed::capture::{ClockKind, ReceiverDecl};
 use crate::feed::RawFrame;
+use crate::geo::geodetic_to_ecef;
 use crate::geo::FT_TO_M;
-use crate::mlat::group::{Added, Group, Grouper};
+use crate::mlat::group::{Added, Group, GroupInfo, Grouper};
+use crate::mlat::{Mlat, MlatConfig, MlatFix};
 use crate::modes::nic::{nacp_epu_m, nucp_hpl_m};
 use crate::modes::{Body, Decoder, DecoderConfig, Es};
 
@@ -30,6 +32,7 @@ pub struct CoreConfig {
     pub max_range_km: f64,
     /// Aircraft not heard for this long are forgotten (s).
     pub aircraft_ttl_s: f64,
+    pub mlat: MlatConfig,
 }
 
 impl Default for CoreConfig {
@@ -39,6 +42,7 @@ impl Default for CoreConfig {
             max_pending_groups: 200_000,
             max_range_km: 600.0,
             aircraft_ttl_s: 300.0,
+            mlat: MlatConfig::default(),
         }
     }
 }
@@ -84,6 +88,7 @@ pub struct PositionReport {
 #[derive(Clone, Debug, PartialEq)]
 pub enum Event {
     Position(PositionReport),
+    Mlat(MlatFix),
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -95,6 +100,7 @@ pub struct CoreStats {
     pub duplicates: u64,
     pub messages: u64,
     pub positions: u64,
+    pub fixes: u64,
 }
 
 struct RxState {
@@ -106,8 +112,9 @@ pub struct Core {
     receivers: Vec<RxState>,
     decoder: Decoder,
     grouper: Grouper,
+    mlat: Mlat,
     stats: CoreStats,
-    done_groups: u64,
+    min_sync_nacp: u8,
 }
 
 impl Core {
@@ -122,12 +129,14 @@ impl Core {
             receivers: Vec::new(),
             decoder: Decoder::new(dcfg),
             grouper: Grouper::new(cfg.group_wait_s, cfg.max_pending_groups),
+            mlat: Mlat::new(cfg.mlat.clone()),
             stats: CoreStats::default(),
-            done_groups: 0,
+            min_sync_nacp: cfg.mlat.min_sync_nacp,
         }
     }
 
     pub fn add_receiver(&mut self, decl: ReceiverDecl) -> usize {
+        self.mlat.add_receiver(&decl);
         self.receivers.push(RxState { decl, frames: 0 });
         self.receivers.len() - 1
     }
@@ -148,21 +157,30 @@ impl Core {
         &self.grouper
     }
 
+    pub fn mlat(&self) -> &Mlat {
+        &self.mlat
+    }
+
     /// Moves time forward to `now` (arrival-time scale): groups whose wait ran out are processed.
-    pub fn advance(&mut self, now: f64) {
-        let done = &mut self.done_groups;
-        self.grouper.advance(now, &mut |g: Group| Self::on_group(done, g));
+    pub fn advance(&mut self, now: f64, out: &mut Vec<Event>) {
+        let (mlat, stats) = (&mut self.mlat, &mut self.stats);
+        self.grouper.advance(now, &mut |g: Group| Self::on_group(mlat, stats, &g, now, out));
     }
 
     /// End of input: everything pending is processed.
-    pub fn finish(&mut self) {
-        let done = &mut self.done_groups;
-        self.grouper.flush(&mut |g: Group| Self::on_group(done, g));
+    pub fn finish(&mut self, out: &mut Vec<Event>) {
+        let (mlat, stats) = (&mut self.mlat, &mut self.stats);
+        self.grouper.flush(&mut |g: Group| {
+            let now = g.first_arrival;
+            Self::on_group(mlat, stats, &g, now, out)
+        });
     }
 
-    fn on_group(done: &mut u64, _g: Group) {
-        // Multilateration will consume complete groups here.
-        *done += 1;
+    fn on_group(mlat: &mut Mlat, stats: &mut CoreStats, g: &Group, now: f64, out: &mut Vec<Event>) {
+        if let Some(fix) = mlat.on_group(g, now) {
+            stats.fixes += 1;
+            out.push(Event::Mlat(fix));
+        }
     }
 
     /// One frame from receiver `rx`, arrived at `arrival` (Unix s).
@@ -181,9 +199,12 @@ impl Core {
             self.stats.mode_ac += 1;
             return;
         }
-        self.advance(arrival);
-        let done = &mut self.done_groups;
-        match self.grouper.add(rx, arrival, frame, &mut |g: Group| Self::on_group(done, g)) {
+        self.advance(arrival, out);
+        let (mlat, stats) = (&mut self.mlat, &mut self.stats);
+        match self
+            .grouper
+            .add(rx, arrival, frame, &mut |g: Group| Self::on_group(mlat, stats, &g, arrival, out))
+        {
             Added::New => {}
             Added::Joined => return,
             Added::Duplicate => {
@@ -196,8 +217,50 @@ impl Core {
             return;
         };
         self.stats.messages += 1;
+        let mut info = GroupInfo {
+            decoded: true,
+            df: d.msg.df,
+            addr: d.msg.addr,
+            addr_known: d.trusted(),
+            ..Default::default()
+        };
+        match d.msg.body {
+            Body::AirAir { alt_ft, .. } | Body::Altitude { alt_ft, .. } => info.alt_baro_ft = alt_ft,
+            Body::Extended(es) => {
+                if let Es::AirbornePosition { alt_ft, gnss: false, .. } = es.kind {
+                    info.alt_baro_ft = alt_ft;
+                }
+            }
+            _ => {}
+        }
+        let report = self.position_report(rx, arrival, frame, &d);
+        if let Some(p) = &report {
+            // This transmission's own position: a clock synchronisation source.
+            if let (Some(alt), Some(sigma), false) = (p.alt_m, p.sigma_m, p.surface) {
+                if p.nac_p.unwrap_or(0) >= self.min_sync_nacp {
+                    info.adsb_ecef = Some(geodetic_to_ecef(p.lat, p.lon, alt));
+                    info.adsb_sigma_m = sigma;
+                }
+            }
+        }
+        self.grouper.set_newest_info(info);
+        if let Some(p) = report {
+            self.stats.positions += 1;
+            out.push(Event::Position(p));
+        }
+    }
+
+    /// The ADS-B position report of a decoded frame, if it has a published position.
+    fn position_report(
+        &self,
+        rx: usize,
+        arrival: f64,
+        frame: &RawFrame,
+        d: &crate::modes::Decoded,
+    ) -> Option<PositionReport> {
+        let decl = &self.receivers[rx].decl;
         let (Some(p), Body::Extended(es)) = (d.position.filter(|p| p.reliable), d.msg.body) else {
-            return;
+            return None;
         };
         let t = match decl.clock {
             ClockKind::Gps if frame.has_timing() => ClockKind::gps_unix(frame.timestamp, arrival),
@@ -216,8 +279,7 @@ impl Core {
             Some(n) => nacp_epu_m(n),
             None => d.nuc_p.and_then(nucp_hpl_m).map(|h| h / 2.0),
         };
-        self.stats.positions += 1;
-        out.push(Event::Position(PositionReport {
+        Some(PositionReport {
             addr: d.msg.addr,
             t,
             lat: p.lat,
@@ -228,11 +290,6 @@ impl Core {
             sigma_m: epu.map(|e| e / 2.448),
             surface: p.surface,
             rx,
-        }));
-    }
-
-    /// Transmissions whose groups are complete.
-    pub fn groups_done(&self) -> u64 {
-        self.done_groups
+        })
     }
 }

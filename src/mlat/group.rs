@@ -18,12 +18,31 @@ pub struct Copy {
     pub signal: u8,
 }
 
+/// What decoding the first copy taught us about the transmission.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct GroupInfo {
+    pub decoded: bool,
+    pub df: u8,
+    pub addr: u32,
+    /// The address is verified (parity) or belongs to a known aircraft.
+    pub addr_known: bool,
+    /// Barometric altitude carried by this transmission (ft).
+    pub alt_baro_ft: Option<i32>,
+    /// ADS-B position of this very transmission (ECEF, m) and its 1-sigma
+    /// horizontal error (m): a clock synchronisation source.
+    pub adsb_ecef: Option<[f64; 3]>,
+    pub adsb_sigma_m: f64,
+    /// The aircraft's ADS-B is not trusted (conformance monitor).
+    pub suspect: bool,
+}
+
 /// All copies of one transmission.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Group {
     pub frame: RawFrame,
     pub first_arrival: f64,
     pub copies: Vec<Copy>,
+    pub info: GroupInfo,
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -87,12 +106,20 @@ impl Grouper {
         let k = key(frame);
         if let Some(&seq) = self.pending.get(&k) {
             let g = &mut self.queue[seq - self.base];
-            if g.copies.iter().any(|c| c.rx == rx) {
-                self.stats.duplicate_copies += 1;
-                return Added::Duplicate;
+            match g.copies.iter().find(|c| c.rx == rx) {
+                None => {
+                    g.copies.push(copy);
+                    return Added::Joined;
+                }
+                // The same receiver again with the same timestamp: a duplicate.
+                Some(c) if c.timestamp == copy.timestamp || !frame.has_timing() => {
+                    self.stats.duplicate_copies += 1;
+                    return Added::Duplicate;
+                }
+                // Same bytes, another time: a second transmission (replies
+                // repeat their bytes); it starts its own group below.
+                Some(_) => {}
             }
-            g.copies.push(copy);
-            return Added::Joined;
         }
         if self.queue.len() >= self.max_pending {
             self.stats.overflow += 1;
@@ -100,8 +127,20 @@ impl Grouper {
         }
         self.stats.groups += 1;
         self.pending.insert(k, self.base + self.queue.len());
-        self.queue.push_back(Group { frame: *frame, first_arrival: arrival, copies: vec![copy] });
+        self.queue.push_back(Group {
+            frame: *frame,
+            first_arrival: arrival,
+            copies: vec![copy],
+            info: GroupInfo::default(),
+        });
         Added::New
+    }
+
+    /// Records what decoding taught about the transmission just added as `New`.
+    pub fn set_newest_info(&mut self, info: GroupInfo) {
+        if let Some(g) = self.queue.back_mut() {
+            g.info = info;
+        }
     }
 
     /// Hands out every group whose wait has run out by `now`.
@@ -119,7 +158,11 @@ impl Grouper {
 
     fn pop_front(&mut self, done: &mut impl FnMut(Group)) {
         if let Some(g) = self.queue.pop_front() {
-            self.pending.remove(&key(&g.frame));
+            let k = key(&g.frame);
+            // A later group with the same bytes may own the key now.
+            if self.pending.get(&k) == Some(&self.base) {
+                self.pending.remove(&k);
+            }
             self.base += 1;
             done(g);
         }
@@ -142,6 +185,9 @@ mod tests {
         assert_eq!(g.add(0, 10.0, &a, &mut |x| out.push(x)), Added::New);
         assert_eq!(g.add(1, 10.05, &a, &mut |x| out.push(x)), Added::Joined);
         assert_eq!(g.add(1, 10.06, &a, &mut |x| out.push(x)), Added::Duplicate);
+        // Same bytes from a receiver already in the group, at another time: a new transmission.
+        let later = crate::feed::frame_from_hex("8D4840D6202CC371C32CE0576098", 99, 1).unwrap();
+        assert_eq!(g.add(1, 10.07, &later, &mut |x| out.push(x)), Added::New);
         assert_eq!(g.add(2, 10.1, &f("5D4840D61F3A2B"), &mut |x| out.push(x)), Added::New);
         g.advance(10.19, &mut |x| out.push(x));
         assert!(out.is_empty());
@@ -149,9 +195,10 @@ mod tests {
         assert_eq!(out.len(), 1);
         assert_eq!(out[0].copies.len(), 2);
         // The same bytes after the wait are a new transmission.
+        g.advance(10.7, &mut |x| out.push(x));
         assert_eq!(g.add(0, 10.7, &a, &mut |x| out.push(x)), Added::New);
         g.flush(&mut |x| out.push(x));
-        assert_eq!(out.len(), 3);
+        assert_eq!(out.len(), 4);
         assert_eq!(g.stats().duplicate_copies, 1);
     }
 

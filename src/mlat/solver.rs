@@ -351,6 +351,28 @@ fn scaled_inverse(a: &Matrix4<f64>) -> Option<Matrix4<f64>> {
     Some(Matrix4::from_fn(|r, c| inv[(r, c)] * d[r] * d[c]))
 }
 
+/// Per-measurement residuals (s, measured minus modelled) and leverages at a
+/// solution: what self-calibration learns receiver biases and noise from.
+/// A residual shrinks by `1 - leverage` because the fit absorbs part of it.
+pub fn residuals(ms: &[Measurement], alt: Option<AltitudeConstraint>, fix: &Fix) -> Vec<(f64, f64)> {
+    let t0 = ms.iter().map(|m| m.t).fold(f64::INFINITY, f64::min);
+    let x = Vector4::new(fix.ecef[0], fix.ecef[1], fix.ecef[2], C_AIR * (fix.t_emit - t0));
+    let nrm = normal(&x, ms, t0, alt);
+    let Some(inv) = scaled_inverse(&nrm.a) else { return Vec::new() };
+    let p = Vector3::from(fix.ecef);
+    ms.iter()
+        .map(|m| {
+            let d = p - Vector3::from(m.pos);
+            let r = d.norm().max(1.0);
+            let res = C_AIR * (m.t - t0) - r - x[3];
+            let j = Vector4::new(d[0] / r, d[1] / r, d[2] / r, 1.0);
+            let w = 1.0 / (C_AIR * m.sigma_t).powi(2);
+            let h = w * (j.transpose() * inv * j)[0];
+            (res / C_AIR, h)
+        })
+        .collect()
+}
+
 /// Levenberg-Marquardt from `x`.
 fn refine(
     mut x: Vector4<f64>,

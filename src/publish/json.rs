@@ -4,6 +4,23 @@
 use serde::Serialize;
 
 use crate::core::{Event, PositionReport};
+use crate::mlat::MlatFix;
+
+#[derive(Serialize)]
+struct MlatRecord<'a> {
+    #[serde(rename = "type")]
+    kind: &'static str,
+    hex: String,
+    t: f64,
+    lat: f64,
+    lon: f64,
+    alt_m: f64,
+    cov_en: [[f64; 2]; 2],
+    receivers: Vec<&'a str>,
+    gdop: f64,
+    chi2: f64,
+    altitude_used: bool,
+}
 
 #[derive(Serialize)]
 struct PositionRecord<'a> {
@@ -36,12 +53,14 @@ pub fn write_event<'a>(
         Event::Position(p) => {
             serde_json::to_writer(&mut *out, &position_record(p, receiver_id(p.rx)))?;
         }
+        Event::Mlat(f) => {
+            serde_json::to_writer(&mut *out, &mlat_record(f, &receiver_id))?;
+        }
     }
     out.write_all(b"\n")
 }
 
 fn position_record<'a>(p: &PositionReport, receiver: &'a str) -> PositionRecord<'a> {
-    let round = |v: f64, k: f64| (v * k).round() / k;
     PositionRecord {
         // A decoded ADS-B position report, before any tracking.
         kind: "position",
@@ -56,5 +75,25 @@ fn position_record<'a>(p: &PositionReport, receiver: &'a str) -> PositionRecord<
         cov_en: p.sigma_m.map(|s| [[s * s, 0.0], [0.0, s * s]]),
         surface: p.surface,
         receiver,
+    }
+}
+
+fn round(v: f64, k: f64) -> f64 {
+    (v * k).round() / k
+}
+
+fn mlat_record<'a>(f: &MlatFix, receiver_id: &impl Fn(usize) -> &'a str) -> MlatRecord<'a> {
+    MlatRecord {
+        kind: "mlat",
+        hex: format!("{:06X}", f.addr),
+        t: round(f.t, 1e9),
+        lat: round(f.lat, 1e8),
+        lon: round(f.lon, 1e8),
+        alt_m: round(f.alt_m, 100.0),
+        cov_en: f.cov_en.map(|r| r.map(|v| round(v, 1e3))),
+        receivers: f.receivers.iter().map(|&r| receiver_id(r)).collect(),
+        gdop: round(f.gdop, 1e3),
+        chi2: round(f.chi2, 1e3),
+        altitude_used: f.altitude_used,
     }
 }

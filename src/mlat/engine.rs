@@ -1,0 +1,407 @@
+//! The multilateration engine: complete groups in, fixes out.
+//!
+//! Per group: receivers known, healthy and with usable timestamps; copies from
+//! receivers within 1 km of one already used are dropped (they add no
+//! geometry); DF17 positions feed clock synchronisation; all copies go onto
+//! one time base; an altitude constraint comes from the message or the
+//! aircraft's recent altitude; the solver does the rest. Addresses that
+//! nothing verified are only trusted when an over-determined fix is
+//! consistent (identical copies at geometrically consistent times).
+
+use std::collections::HashMap;
+
+use serde::Deserialize;
+
+use super::clock::PairParams;
+use super::group::Group;
+use super::solver::{solve, AltitudeConstraint, Measurement, Reject, SolverLimits, C_AIR};
+use super::sync::{ClockSync, LocalCopy};
+use crate::feed::capture::{ClockKind, ReceiverDecl};
+use crate::geo::{geodetic_to_ecef, FT_TO_M};
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MlatConfig {
+    /// Receivers closer than this (m) count as one.
+    pub min_separation_m: f64,
+    /// Timing jitter, 1 sigma (ns), by clock type.
+    pub jitter_beast12_ns: f64,
+    pub jitter_gps_ns: f64,
+    /// Uncertainty (m) of the barometric-to-geometric correction applied to
+    /// Mode S altitudes when no local estimate exists.
+    pub baro_sigma_m: f64,
+    /// A recent altitude is used up to this age (s), its sigma growing by
+    /// `alt_growth_mps` per second.
+    pub max_alt_age_s: f64,
+    pub alt_growth_mps: f64,
+    /// Lowest NACp of an ADS-B position used for clock synchronisation.
+    pub min_sync_nacp: u8,
+    /// Learn each receiver's timing bias and noise from the residuals of
+    /// over-determined fixes (self-calibration).
+    pub calibrate: bool,
+}
+
+impl Default for MlatConfig {
+    fn default() -> Self {
+        MlatConfig {
+            min_separation_m: 1_000.0,
+            jitter_beast12_ns: 83.0,
+            jitter_gps_ns: 50.0,
+            baro_sigma_m: 75.0,
+            max_alt_age_s: 30.0,
+            alt_growth_mps: 15.0,
+            min_sync_nacp: 6,
+            calibrate: true,
+        }
+    }
+}
+
+/// One multilateration fix.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MlatFix {
+    pub addr: u32,
+    /// Emission time (Unix s): exact when a GPS-timed receiver is in the
+    /// group's tree, else from the first arrival.
+    pub t: f64,
+    pub lat: f64,
+    pub lon: f64,
+    pub alt_m: f64,
+    pub cov_en: [[f64; 2]; 2],
+    pub cov_ecef: [[f64; 3]; 3],
+    pub receivers: Vec<usize>,
+    pub gdop: f64,
+    /// Residual chi-square per degree of freedom (0 when exactly determined).
+    pub chi2: f64,
+    pub dof: usize,
+    pub altitude_used: bool,
+    pub df: u8,
+}
+
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct MlatStats {
+    pub groups: u64,
+    pub too_few_receivers: u64,
+    pub unknown_receiver: u64,
+    pub no_timing: u64,
+    pub excluded_receiver_copies: u64,
+    pub close_receivers: u64,
+    pub sync_messages: u64,
+    pub fixes: u64,
+    pub unverified_address: u64,
+    pub rejects: HashMap<&'static str, u64>,
+}
+
+struct Rx {
+    ecef: [f64; 3],
+    clock: ClockKind,
+    /// Configured jitter (s): the prior for the learnt noise.
+    sigma_t: f64,
+    beast_epoch: Option<u64>,
+    cal: Calibration,
+}
+
+/// What self-calibration has learnt about a receiver's timing.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Calibration {
+    /// Fixes contributing.
+    pub n: u64,
+    /// Mean timing error (s), removed from its timestamps.
+    pub bias_s: f64,
+    /// Mean squared timing error about the bias (s^2).
+    pub var_s2: f64,
+}
+
+/// Calibration needs this many fixes before it is applied.
+const CAL_MIN: u64 = 20;
+/// Exponential memory of the noise estimate (fixes).
+const CAL_MEMORY: f64 = 200.0;
+/// Step of the bias estimate towards each residual.
+const CAL_STEP: f64 = 0.05;
+
+impl Rx {
+    /// Timing sigma (s) to weight this receiver with: learnt when enough is
+    /// known, the configured jitter before.
+    fn sigma(&self) -> f64 {
+        if self.cal.n >= CAL_MIN {
+            // Never claim better than a third of the configured jitter.
+            self.cal.var_s2.sqrt().max(self.sigma_t / 3.0)
+        } else {
+            self.sigma_t
+        }
+    }
+
+    fn bias(&self) -> f64 {
+        if self.cal.n >= CAL_MIN {
+            self.cal.bias_s
+        } else {
+            0.0
+        }
+    }
+}
+
+#[derive(Clone, Copy, Default)]
+struct AcState {
+    alt_ft: Option<(i32, f64)>,
+    last_fix: Option<([f64; 3], f64)>,
+}
+
+pub struct Mlat {
+    cfg: MlatConfig,
+    limits: SolverLimits,
+    rxs: Vec<Rx>,
+    pub sync: ClockSync,
+    aircraft: HashMap<u32, AcState>,
+    /// Nanoseconds since the Unix epoch of the GPS time base's zero.
+    gps_epoch_ns: Option<i64>,
+    pub stats: MlatStats,
+}
+
+impl Mlat {
+    /// What calibration learnt about receiver `rx`.
+    pub fn calibration(&self, rx: usize) -> Calibration {
+        self.rxs[rx].cal
+    }
+
+    pub fn new(cfg: MlatConfig) -> Self {
+        Mlat {
+            cfg,
+            limits: SolverLimits::default(),
+            rxs: Vec::new(),
+            sync: ClockSync::new(PairParams::default()),
+            aircraft: HashMap::new(),
+            gps_epoch_ns: None,
+            stats: MlatStats::default(),
+        }
+    }
+
+    pub fn add_receiver(&mut self, d: &ReceiverDecl) {
+        let jitter = match d.clock {
+            ClockKind::Beast12 => self.cfg.jitter_beast12_ns,
+            ClockKind::Gps => self.cfg.jitter_gps_ns,
+        };
+        self.rxs.push(Rx {
+            ecef: geodetic_to_ecef(d.lat, d.lon, d.alt),
+            clock: d.clock,
+            sigma_t: jitter * 1e-9,
+            beast_epoch: None,
+            cal: Calibration::default(),
+        });
+        self.sync.add_receiver(d.clock);
+    }
+
+    /// An altitude heard from an aircraft (any message), for later constraints.
+    pub fn note_altitude(&mut self, addr: u32, alt_ft: i32, now: f64) {
+        self.aircraft.entry(addr).or_default().alt_ft = Some((alt_ft, now));
+    }
+
+    /// A receiver's timestamp in its local seconds (small numbers, full precision).
+    fn local_time(&mut self, rx: usize, ts: u64, arrival: f64) -> f64 {
+        match self.rxs[rx].clock {
+            ClockKind::Gps => {
+                let sod_ns = (ts >> 30) as i64 * 1_000_000_000 + (ts & 0x3FFF_FFFF) as i64;
+                let day = (arrival / 86_400.0).floor() as i64;
+                let mut ns = day * 86_400_000_000_000 + sod_ns;
+                let arr_ns = (arrival * 1e9) as i64;
+                if ns - arr_ns > 43_200_000_000_000 {
+                    ns -= 86_400_000_000_000;
+                } else if arr_ns - ns > 43_200_000_000_000 {
+                    ns += 86_400_000_000_000;
+                }
+                let epoch = *self.gps_epoch_ns.get_or_insert(day * 86_400_000_000_000);
+                (ns - epoch) as f64 * 1e-9
+            }
+            ClockKind::Beast12 => {
+                let epoch = *self.rxs[rx].beast_epoch.get_or_insert(ts);
+                (ts as i64 - epoch as i64) as f64 / 12e6
+            }
+        }
+    }
+
+    fn reject(&mut self, why: Reject) {
+        *self.stats.rejects.entry(why.name()).or_default() += 1;
+    }
+
+    /// A complete group at server time `now`.
+    pub fn on_group(&mut self, g: &Group, now: f64) -> Option<MlatFix> {
+        self.stats.groups += 1;
+        let info = g.info;
+        if !info.decoded || g.copies.len() < 2 {
+            self.stats.too_few_receivers += (g.copies.len() < 2) as u64;
+            return None;
+        }
+        // Usable copies: known receiver, timing, healthy, not next to another.
+        let mut copies: Vec<LocalCopy> = Vec::with_capacity(g.copies.len());
+        let mut arrivals = Vec::with_capacity(g.copies.len());
+        for c in &g.copies {
+            if c.rx >= self.rxs.len() {
+                self.stats.unknown_receiver += 1;
+                continue;
+            }
+            if c.timestamp == 0 || c.timestamp == crate::feed::MLAT_MAGIC_TIMESTAMP {
+                self.stats.no_timing += 1;
+                continue;
+            }
+            if self.sync.health[c.rx].excluded {
+                self.stats.excluded_receiver_copies += 1;
+                continue;
+            }
+            let t = self.local_time(c.rx, c.timestamp, c.arrival);
+            copies.push(LocalCopy { rx: c.rx, t });
+            arrivals.push(c.arrival);
+        }
+        if copies.len() < 2 {
+            self.stats.too_few_receivers += 1;
+            return None;
+        }
+        if let (Some(p), false) = (info.adsb_ecef, info.suspect) {
+            self.sync_from(&copies, p, info.adsb_sigma_m, now);
+        }
+        if let Some(a) = info.alt_baro_ft {
+            self.note_altitude(info.addr, a, now);
+        }
+        let (times, root) = self.sync.common_time(&copies, now);
+        // One measurement per site: receivers closer than the minimum
+        // separation add no geometry, so their times are averaged (inverse
+        // variance) into one measurement with a smaller sigma.
+        let mut ms: Vec<Measurement> = Vec::with_capacity(copies.len());
+        let mut sites: Vec<Vec<usize>> = Vec::with_capacity(copies.len());
+        for (c, t) in copies.iter().zip(&times) {
+            let Some((t, var)) = t else { continue };
+            let rx = &self.rxs[c.rx];
+            let m =
+                Measurement { pos: rx.ecef, t: *t - rx.bias(), sigma_t: (rx.sigma().powi(2) + var).sqrt() };
+            match ms.iter().position(|o| dist(o.pos, m.pos) < self.cfg.min_separation_m) {
+                Some(k) => {
+                    self.stats.close_receivers += 1;
+                    let (w1, w2) = (1.0 / ms[k].sigma_t.powi(2), 1.0 / m.sigma_t.powi(2));
+                    ms[k].t = (ms[k].t * w1 + m.t * w2) / (w1 + w2);
+                    ms[k].sigma_t = (1.0 / (w1 + w2)).sqrt();
+                    sites[k].push(c.rx);
+                }
+                None => {
+                    ms.push(m);
+                    sites.push(vec![c.rx]);
+                }
+            }
+        }
+        let used: Vec<usize> = sites.iter().flatten().copied().collect();
+        let ac = self.aircraft.get(&info.addr).copied().unwrap_or_default();
+        let alt = ac.alt_ft.and_then(|(ft, t)| {
+            let age = (now - t).abs();
+            (age <= self.cfg.max_alt_age_s).then(|| {
+                // 25 ft steps, the baro-to-geometric correction, and climb since.
+                let quant = 25.0 * FT_TO_M / 12f64.sqrt();
+                let sigma =
+                    (quant.powi(2) + self.cfg.baro_sigma_m.powi(2) + (age * self.cfg.alt_growth_mps).powi(2))
+                        .sqrt();
+                AltitudeConstraint { h_m: ft as f64 * FT_TO_M, sigma_m: sigma }
+            })
+        });
+        if ms.len() < 3 || (ms.len() < 4 && alt.is_none()) {
+            self.stats.too_few_receivers += 1;
+            return None;
+        }
+        let guess = ac.last_fix.filter(|(_, t)| (now - t).abs() < 30.0).map(|(p, _)| p);
+        let fix = match solve(&ms, alt, guess, &self.limits) {
+            Ok(f) => f,
+            Err(why) => {
+                self.reject(why);
+                return None;
+            }
+        };
+        if !info.addr_known && fix.dof == 0 {
+            // Nothing checks an unverified address: no fix from it.
+            self.stats.unverified_address += 1;
+            return None;
+        }
+        if self.cfg.calibrate && fix.dof >= 1 {
+            self.learn(&ms, alt, &fix, &sites);
+        }
+        self.aircraft.entry(info.addr).or_default().last_fix = Some((fix.ecef, now));
+        self.stats.fixes += 1;
+        let root_rx = copies[root].rx;
+        let t = match (self.rxs[root_rx].clock, self.gps_epoch_ns) {
+            (ClockKind::Gps, Some(epoch)) => epoch as f64 * 1e-9 + fix.t_emit,
+            _ => {
+                let first = arrivals.iter().cloned().fold(f64::INFINITY, f64::min);
+                let nearest = ms.iter().map(|m| dist(m.pos, fix.ecef)).fold(f64::INFINITY, f64::min);
+                first - nearest / C_AIR
+            }
+        };
+        Some(MlatFix {
+            addr: info.addr,
+            t,
+            lat: fix.lat,
+            lon: fix.lon,
+            alt_m: fix.h_m,
+            cov_en: fix.cov_en,
+            cov_ecef: fix.cov_ecef,
+            receivers: used,
+            gdop: fix.gdop,
+            chi2: if fix.dof > 0 { fix.chi2 / fix.dof as f64 } else { 0.0 },
+            dof: fix.dof,
+            altitude_used: alt.is_some(),
+            df: info.df,
+        })
+    }
+
+    /// Self-calibration: a residual divided by `1 - leverage` is an unbiased
+    /// look at the receiver's own timing error; its mean is the receiver's
+    /// bias, its spread the receiver's noise. A bias common to all receivers
+    /// is absorbed by the emission time, so only relative biases are learnt,
+    /// which is all the solver needs.
+    fn learn(
+        &mut self,
+        ms: &[Measurement],
+        alt: Option<AltitudeConstraint>,
+        fix: &super::solver::Fix,
+        sites: &[Vec<usize>],
+    ) {
+        let res = super::solver::residuals(ms, alt, fix);
+        for (site, &(r, h)) in sites.iter().zip(&res) {
+            if h >= 0.95 {
+                continue;
+            }
+            for &rx in site {
+                let cal = &mut self.rxs[rx].cal;
+                cal.n += 1;
+                // Biases of receivers that share fixes are coupled: a small
+                // step towards each residual (a stochastic gradient) converges
+                // where jumping to r / (1 - h) oscillates.
+                cal.bias_s += CAL_STEP * r;
+                // E[r^2] = sigma^2 (1 - h): the noise variance, by running mean.
+                let a = 1.0 / (cal.n as f64).min(CAL_MEMORY);
+                cal.var_s2 += a * (r * r / (1.0 - h) - cal.var_s2);
+            }
+        }
+    }
+
+    fn sync_from(&mut self, copies: &[LocalCopy], p: [f64; 3], sigma_pos: f64, now: f64) {
+        self.stats.sync_messages += 1;
+        let n = copies.len();
+        let ranges: Vec<f64> = copies.iter().map(|c| dist(self.rxs[c.rx].ecef, p)).collect();
+        let var: Vec<f64> = copies.iter().map(|c| self.rxs[c.rx].sigma_t.powi(2)).collect();
+        // The emitter's position error moves the two ranges differently: by
+        // the difference of the unit vectors towards the receivers.
+        let units: Vec<[f64; 3]> = copies
+            .iter()
+            .zip(&ranges)
+            .map(|(c, r)| {
+                let e = self.rxs[c.rx].ecef;
+                [(e[0] - p[0]) / r, (e[1] - p[1]) / r, (e[2] - p[2]) / r]
+            })
+            .collect();
+        let mut geom = vec![vec![0.0; n]; n];
+        for a in 0..n {
+            for b in 0..n {
+                let d2: f64 = (0..3).map(|k| (units[a][k] - units[b][k]).powi(2)).sum();
+                geom[a][b] = sigma_pos * sigma_pos * d2 / (C_AIR * C_AIR);
+            }
+        }
+        self.sync.observe(copies, &ranges, &var, &geom, now);
+    }
+}
+
+fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}

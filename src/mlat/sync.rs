@@ -1,0 +1,244 @@
+//! Clock synchronisation across the network: one [`PairFilter`] per receiver
+//! pair that hears the same ADS-B positions, receiver health from how often
+//! their measurements are outliers, and, per transmission, a common time base
+//! built over a minimum spanning tree of the pairs weighted by their variance.
+//!
+//! GPS-timed receivers share one clock already (offset 0, no filter needed);
+//! a free-running receiver joins the tree through its pair filters.
+
+use std::collections::HashMap;
+
+use super::clock::{PairFilter, PairParams, Update};
+use super::solver::C_AIR;
+use crate::feed::capture::ClockKind;
+
+/// One receiver's copy, in its own local seconds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LocalCopy {
+    pub rx: usize,
+    pub t: f64,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RxHealth {
+    pub sync_updates: u64,
+    pub sync_outliers: u64,
+    /// Exponential mean of the outlier indicator over recent sync updates.
+    pub outlier_rate: f64,
+    pub excluded: bool,
+    pub exclusions: u64,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SyncStats {
+    pub updates: u64,
+    pub outliers: u64,
+    pub restarts: u64,
+}
+
+pub struct ClockSync {
+    pub params: PairParams,
+    pairs: HashMap<(usize, usize), PairFilter>,
+    clocks: Vec<ClockKind>,
+    pub health: Vec<RxHealth>,
+    pub stats: SyncStats,
+}
+
+/// Above this recent outlier rate a receiver is excluded; below the second it is readmitted.
+const EXCLUDE_RATE: f64 = 0.3;
+const READMIT_RATE: f64 = 0.1;
+const HEALTH_MIN_UPDATES: u64 = 30;
+
+impl ClockSync {
+    pub fn new(params: PairParams) -> Self {
+        ClockSync {
+            params,
+            pairs: HashMap::new(),
+            clocks: Vec::new(),
+            health: Vec::new(),
+            stats: SyncStats::default(),
+        }
+    }
+
+    pub fn add_receiver(&mut self, clock: ClockKind) {
+        self.clocks.push(clock);
+        self.health.push(RxHealth::default());
+    }
+
+    pub fn pairs(&self) -> impl Iterator<Item = (&(usize, usize), &PairFilter)> {
+        self.pairs.iter()
+    }
+
+    /// A transmission from a known position heard by several receivers: one
+    /// measurement for every pair. `ranges` are emitter-receiver distances
+    /// (m), `var` each copy's timing variance plus its share of the
+    /// emitter's position error (s^2).
+    pub fn observe(
+        &mut self,
+        copies: &[LocalCopy],
+        ranges: &[f64],
+        var: &[f64],
+        geom_var: &[Vec<f64>],
+        now: f64,
+    ) {
+        for a in 0..copies.len() {
+            for b in a + 1..copies.len() {
+                let (ca, cb) = (copies[a], copies[b]);
+                if self.clocks[ca.rx] == ClockKind::Gps && self.clocks[cb.rx] == ClockKind::Gps {
+                    continue;
+                }
+                let (i, j, ti, tj, ri, rj) = if ca.rx < cb.rx {
+                    (ca.rx, cb.rx, ca.t, cb.t, ranges[a], ranges[b])
+                } else {
+                    (cb.rx, ca.rx, cb.t, ca.t, ranges[b], ranges[a])
+                };
+                let z = (tj - rj / C_AIR) - (ti - ri / C_AIR);
+                let r = var[a] + var[b] + geom_var[a][b];
+                let tau = ti - ri / C_AIR;
+                let params = self.params;
+                let result = match self.pairs.get_mut(&(i, j)) {
+                    Some(f) => f.update(z, r, tau, now, &params),
+                    None => {
+                        self.pairs.insert((i, j), PairFilter::new(z, r, tau, now, &params));
+                        Update::Accepted
+                    }
+                };
+                self.stats.updates += 1;
+                match result {
+                    Update::Outlier => self.stats.outliers += 1,
+                    Update::Restarted => self.stats.restarts += 1,
+                    Update::Accepted => {}
+                }
+                let outlier = result != Update::Accepted;
+                for rx in [i, j] {
+                    self.note_health(rx, outlier);
+                }
+            }
+        }
+    }
+
+    fn note_health(&mut self, rx: usize, outlier: bool) {
+        let h = &mut self.health[rx];
+        h.sync_updates += 1;
+        h.sync_outliers += outlier as u64;
+        h.outlier_rate = 0.97 * h.outlier_rate + 0.03 * outlier as u8 as f64;
+        if h.sync_updates >= HEALTH_MIN_UPDATES {
+            if !h.excluded && h.outlier_rate > EXCLUDE_RATE {
+                h.excluded = true;
+                h.exclusions += 1;
+                tracing::warn!(
+                    receiver = rx,
+                    rate = h.outlier_rate,
+                    "receiver excluded from MLAT: sync keeps failing"
+                );
+            } else if h.excluded && h.outlier_rate < READMIT_RATE {
+                h.excluded = false;
+                tracing::info!(receiver = rx, "receiver readmitted to MLAT");
+            }
+        }
+    }
+
+    /// The relation between two receivers' clocks if usable: `t_j = t_i + offset`,
+    /// evaluated near `t_i`, with its variance.
+    fn edge(&self, i: usize, j: usize, t_i: f64, now: f64) -> Option<(f64, f64)> {
+        if self.clocks[i] == ClockKind::Gps && self.clocks[j] == ClockKind::Gps {
+            return Some((0.0, 0.0));
+        }
+        if i < j {
+            let f = self.pairs.get(&(i, j)).filter(|f| f.valid(now, &self.params))?;
+            Some(f.offset_at(t_i, &self.params))
+        } else {
+            let f = self.pairs.get(&(j, i)).filter(|f| f.valid(now, &self.params))?;
+            // t_i = t_j + offset(t_j): invert around t_j ~ t_i - offset.
+            let (o0, _) = f.offset_at(t_i, &self.params);
+            let (o, v) = f.offset_at(t_i - o0, &self.params);
+            Some((-o, v))
+        }
+    }
+
+    /// Puts a transmission's copies on one time base: the root's clock (a GPS
+    /// receiver when there is one). Returns, per copy index, the time in the
+    /// root's clock and the accumulated variance of the conversion; copies
+    /// the tree cannot reach are `None`. Also returns the root's copy index.
+    pub fn common_time(&self, copies: &[LocalCopy], now: f64) -> (Vec<Option<(f64, f64)>>, usize) {
+        let n = copies.len();
+        let mut out = vec![None; n];
+        if n == 0 {
+            return (out, 0);
+        }
+        // Edge weights once: variance, or None when the pair is not usable.
+        let mut w = vec![vec![None; n]; n];
+        for a in 0..n {
+            for b in 0..n {
+                if a != b {
+                    w[a][b] = self.edge(copies[a].rx, copies[b].rx, copies[a].t, now);
+                }
+            }
+        }
+        let root = (0..n)
+            .max_by_key(|&a| {
+                let gps = self.clocks[copies[a].rx] == ClockKind::Gps;
+                let degree = (0..n).filter(|&b| w[a][b].is_some()).count();
+                (gps as usize, degree, usize::MAX - a)
+            })
+            .expect("non-empty");
+        // Prim's algorithm on variance, converting times as the tree grows.
+        out[root] = Some((copies[root].t, 0.0));
+        let mut in_tree = vec![false; n];
+        in_tree[root] = true;
+        loop {
+            let mut best: Option<(usize, usize, f64, f64)> = None;
+            for a in (0..n).filter(|&a| in_tree[a]) {
+                for b in (0..n).filter(|&b| !in_tree[b]) {
+                    // Edge a -> b: t_b = t_a + offset; we need b's time in root clock.
+                    if let Some((off, var)) = w[a][b] {
+                        let acc = out[a].expect("in tree").1 + var;
+                        if best.is_none_or(|x| acc < x.3) {
+                            best = Some((a, b, off, acc));
+                        }
+                    }
+                }
+            }
+            let Some((a, b, off, acc)) = best else { break };
+            // b's own time, moved into a's clock, then a's conversion to the root applies.
+            let (ta_root, _) = out[a].expect("in tree");
+            let tb_in_a = copies[b].t - off;
+            out[b] = Some((ta_root + (tb_in_a - copies[a].t), acc));
+            in_tree[b] = true;
+        }
+        (out, root)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_chain_of_pairs_puts_everyone_on_the_gps_clock() {
+        let mut s = ClockSync::new(PairParams::default());
+        s.add_receiver(ClockKind::Beast12); // 0: offset +100 s from true time
+        s.add_receiver(ClockKind::Gps); // 1
+        s.add_receiver(ClockKind::Beast12); // 2: offset -50 s
+        let offsets = [100.0, 0.0, -50.0];
+        let var = [1e-16; 3];
+        let g = vec![vec![0.0; 3]; 3];
+        // Sync transmissions at equal range: times are true time plus offset.
+        for k in 0..10 {
+            let t = 1000.0 + k as f64;
+            let copies: Vec<LocalCopy> = (0..3).map(|r| LocalCopy { rx: r, t: t + offsets[r] }).collect();
+            s.observe(&copies, &[1000.0; 3], &var, &g, t);
+        }
+        let t = 1010.5;
+        let copies: Vec<LocalCopy> =
+            (0..3).map(|r| LocalCopy { rx: r, t: t + offsets[r] + r as f64 * 1e-6 }).collect();
+        let (times, root) = s.common_time(&copies, t);
+        assert_eq!(copies[root].rx, 1, "the GPS receiver is the root");
+        for (r, x) in times.iter().enumerate() {
+            let (tt, v) = x.unwrap();
+            assert!((tt - (t + r as f64 * 1e-6)).abs() < 1e-9, "{r}: {tt}");
+            assert!(v < 1e-15);
+        }
+        assert_eq!(s.stats.outliers, 0);
+    }
+}
