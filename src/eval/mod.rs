@@ -89,6 +89,11 @@ impl Truth {
         })
     }
 
+    /// Interpolated truth (lat, lon, alt_m) of an aircraft at `t`.
+    pub fn position(&self, hex: &str, t: f64) -> Option<(f64, f64, f64)> {
+        self.at(hex, t).map(|p| (p.lat, p.lon, p.alt))
+    }
+
     fn span(&self, hex: &str) -> Option<(f64, f64)> {
         let pts = self.tracks.get(hex)?;
         Some((pts.first()?.t, pts.last()?.t))

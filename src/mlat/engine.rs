@@ -36,6 +36,11 @@ pub struct MlatConfig {
     pub alt_growth_mps: f64,
     /// Lowest NACp of an ADS-B position used for clock synchronisation.
     pub min_sync_nacp: u8,
+    /// Clock model of the pair filters: phase noise (ns per square-root
+    /// second) and random walk of the relative frequency (parts per billion
+    /// per square-root second). Smaller values average sync measurements longer.
+    pub clock_phase_noise_ns: f64,
+    pub clock_drift_walk_ppb: f64,
     /// Learn each receiver's timing bias and noise from the residuals of
     /// over-determined fixes (self-calibration).
     pub calibrate: bool,
@@ -51,6 +56,8 @@ impl Default for MlatConfig {
             max_alt_age_s: 30.0,
             alt_growth_mps: 15.0,
             min_sync_nacp: 6,
+            clock_phase_noise_ns: 0.5,
+            clock_drift_walk_ppb: 2.0,
             calibrate: true,
         }
     }
@@ -97,6 +104,8 @@ struct Rx {
     /// Configured jitter (s): the prior for the learnt noise.
     sigma_t: f64,
     beast_epoch: Option<u64>,
+    /// Last (local time, arrival time) seen, to notice clock jumps.
+    last_seen: Option<(f64, f64)>,
     cal: Calibration,
 }
 
@@ -115,6 +124,9 @@ pub struct Calibration {
 const CAL_MIN: u64 = 20;
 /// Exponential memory of the noise estimate (fixes).
 const CAL_MEMORY: f64 = 200.0;
+/// A receiver clock that disagrees with the server's clock by more than this
+/// (s) between two frames has jumped. Network delays vary by far less.
+const CLOCK_JUMP_S: f64 = 5.0;
 /// Step of the bias estimate towards each residual.
 const CAL_STEP: f64 = 0.05;
 
@@ -163,11 +175,16 @@ impl Mlat {
     }
 
     pub fn new(cfg: MlatConfig) -> Self {
+        let pair = PairParams {
+            q_phase: (cfg.clock_phase_noise_ns * 1e-9).powi(2),
+            q_drift: (cfg.clock_drift_walk_ppb * 1e-9).powi(2),
+            ..PairParams::default()
+        };
         Mlat {
             cfg,
             limits: SolverLimits::default(),
             rxs: Vec::new(),
-            sync: ClockSync::new(PairParams::default()),
+            sync: ClockSync::new(pair),
             aircraft: HashMap::new(),
             gps_epoch_ns: None,
             stats: MlatStats::default(),
@@ -184,6 +201,7 @@ impl Mlat {
             clock: d.clock,
             sigma_t: jitter * 1e-9,
             beast_epoch: None,
+            last_seen: None,
             cal: Calibration::default(),
         });
         self.sync.add_receiver(d.clock);
@@ -212,7 +230,20 @@ impl Mlat {
             }
             ClockKind::Beast12 => {
                 let epoch = *self.rxs[rx].beast_epoch.get_or_insert(ts);
-                (ts as i64 - epoch as i64) as f64 / 12e6
+                let local = (ts as i64 - epoch as i64) as f64 / 12e6;
+                // A counter that moved seconds more or less than the server's
+                // clock restarted (or jumped): new epoch, its pairs start again.
+                if let Some((l0, a0)) = self.rxs[rx].last_seen {
+                    if ((local - l0) - (arrival - a0)).abs() > CLOCK_JUMP_S {
+                        self.sync.reset_receiver(rx);
+                        self.rxs[rx].beast_epoch = Some(ts);
+                        self.rxs[rx].last_seen = Some((0.0, arrival));
+                        tracing::info!(receiver = rx, "clock jump: receiver restarted");
+                        return 0.0;
+                    }
+                }
+                self.rxs[rx].last_seen = Some((local, arrival));
+                local
             }
         }
     }

@@ -351,6 +351,41 @@ fn scaled_inverse(a: &Matrix4<f64>) -> Option<Matrix4<f64>> {
     Some(Matrix4::from_fn(|r, c| inv[(r, c)] * d[r] * d[c]))
 }
 
+/// The Cramér-Rao bound of a geometry: the horizontal (east/north)
+/// covariance (m^2) of any unbiased fix of an emitter at `truth` heard by
+/// receivers at `pos` with timing sigmas `sigma_t` (s), with an optional
+/// altitude constraint of sigma `alt_sigma_m`.
+pub fn crb_en(
+    pos: &[[f64; 3]],
+    sigma_t: &[f64],
+    alt_sigma_m: Option<f64>,
+    truth: [f64; 3],
+) -> Option<[[f64; 2]; 2]> {
+    let p = Vector3::from(truth);
+    let mut a = Matrix4::zeros();
+    for (r, s) in pos.iter().zip(sigma_t) {
+        let d = p - Vector3::from(*r);
+        let n = d.norm().max(1.0);
+        let j = Vector4::new(d[0] / n, d[1] / n, d[2] / n, 1.0);
+        a += j * j.transpose() / (C_AIR * s).powi(2);
+    }
+    let (lat, lon, _) = ecef_to_geodetic(truth);
+    if let Some(sh) = alt_sigma_m {
+        let u = up(lat, lon);
+        let j = Vector4::new(u[0], u[1], u[2], 0.0);
+        a += j * j.transpose() / (sh * sh);
+    }
+    let c = scaled_inverse(&a)?.fixed_view::<3, 3>(0, 0).into_owned();
+    let (sp, cp) = lat.to_radians().sin_cos();
+    let (sl, cl) = lon.to_radians().sin_cos();
+    let e = Vector3::new(-sl, cl, 0.0);
+    let nn = Vector3::new(-sp * cl, -sp * sl, cp);
+    Some([
+        [(e.transpose() * c * e)[0], (e.transpose() * c * nn)[0]],
+        [(nn.transpose() * c * e)[0], (nn.transpose() * c * nn)[0]],
+    ])
+}
+
 /// Per-measurement residuals (s, measured minus modelled) and leverages at a
 /// solution: what self-calibration learns receiver biases and noise from.
 /// A residual shrinks by `1 - leverage` because the fit absorbs part of it.

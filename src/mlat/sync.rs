@@ -27,6 +27,8 @@ pub struct RxHealth {
     pub outlier_rate: f64,
     pub excluded: bool,
     pub exclusions: u64,
+    /// Clock jumps seen in the receiver's own timestamps (restarts).
+    pub clock_resets: u64,
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -115,6 +117,15 @@ impl ClockSync {
                 }
             }
         }
+    }
+
+    /// A receiver's clock jumped (restart): its pairs start again, and the
+    /// jump is not held against its health.
+    pub fn reset_receiver(&mut self, rx: usize) {
+        let before = self.pairs.len();
+        self.pairs.retain(|&(i, j), _| i != rx && j != rx);
+        self.stats.restarts += (before - self.pairs.len()) as u64;
+        self.health[rx].clock_resets += 1;
     }
 
     fn note_health(&mut self, rx: usize, outlier: bool) {

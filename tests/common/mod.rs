@@ -36,3 +36,38 @@ pub fn frames(bytes: &[u8], format: InputFormat) -> Vec<(Option<f64>, RawFrame)>
 pub fn unhex(s: &str) -> Vec<u8> {
     (0..s.len()).step_by(2).map(|i| u8::from_str_radix(&s[i..i + 2], 16).unwrap()).collect()
 }
+
+use fuse1090::core::{Core, CoreConfig, Event};
+use fuse1090::feed::capture::{CaptureReader, CaptureRecord, ReceiverDecl};
+
+/// Runs a capture through a core in-process; returns the core (for its
+/// statistics), every event, and the receivers in declaration order.
+pub fn run_core(capture: &[u8], cfg: &CoreConfig) -> (Core, Vec<Event>, Vec<ReceiverDecl>) {
+    let mut reader = CaptureReader::new(capture, "capture");
+    let mut core = Core::new(cfg);
+    let mut events = Vec::new();
+    let mut rxs = Vec::new();
+    while let Some(rec) = reader.next_record().unwrap() {
+        match rec {
+            CaptureRecord::Receiver(d) => {
+                rxs.push(d.clone());
+                core.add_receiver(d);
+            }
+            CaptureRecord::Frame(f) => core.on_frame(f.rx, f.arrival, &f.frame, &mut events),
+        }
+    }
+    core.finish(&mut events);
+    (core, events, rxs)
+}
+
+/// East/north offset (m) of `b` from `a` on the mean sphere (fine for metres to kilometres).
+pub fn en(a_lat: f64, a_lon: f64, b_lat: f64, b_lon: f64) -> [f64; 2] {
+    let r = 6_371_008.8;
+    [(b_lon - a_lon).to_radians() * r * a_lat.to_radians().cos(), (b_lat - a_lat).to_radians() * r]
+}
+
+/// Squared Mahalanobis distance of an east/north error under a covariance.
+pub fn mahalanobis2(e: [f64; 2], c: [[f64; 2]; 2]) -> f64 {
+    let det = c[0][0] * c[1][1] - c[0][1] * c[1][0];
+    (c[1][1] * e[0] * e[0] - (c[0][1] + c[1][0]) * e[0] * e[1] + c[0][0] * e[1] * e[1]) / det
+}

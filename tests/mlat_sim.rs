@@ -1,0 +1,177 @@
+//! Multilateration against the simulator's truth: clock synchronisation of
+//! free-running beast12 receivers from ADS-B, fix accuracy against the
+//! Cramér-Rao bound of each fix's geometry, covariance consistency, and
+//! robustness to a receiver declared 300 m off and to a receiver restart.
+
+mod common;
+
+use std::collections::HashMap;
+
+use common::{en, mahalanobis2, run_core};
+use fuse1090::core::{Core, CoreConfig, Event};
+use fuse1090::eval::Truth;
+use fuse1090::feed::capture::{CaptureReader, CaptureRecord};
+use fuse1090::geo::geodetic_to_ecef;
+use fuse1090::mlat::solver::crb_en;
+use fuse1090::sim::scenario::Scenario;
+use fuse1090::sim::simulate;
+
+fn root() -> std::path::PathBuf {
+    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn sim(s: &Scenario) -> (Vec<u8>, Vec<u8>) {
+    let (mut c, mut t) = (Vec::new(), Vec::new());
+    simulate(s, &mut c, &mut t).unwrap();
+    (c, t)
+}
+
+#[test]
+fn beast12_clocks_synchronise_and_fixes_reach_the_cramer_rao_bound() {
+    // The fusion-8seg flight and receivers, with the 83 ns jitter.
+    let mut scenario = Scenario::load(&root().join("fixtures/scenarios/fusion-8seg.toml")).unwrap();
+    for r in &mut scenario.receiver {
+        r.jitter_ns = 83.0;
+    }
+    let (capture, truth_bytes) = sim(&scenario);
+    let truth = Truth::read(&truth_bytes[..]).unwrap();
+
+    // Drive the core by hand to look at the pairs 30 s in.
+    let mut reader = CaptureReader::new(&capture[..], "capture");
+    let cfg = CoreConfig::default();
+    let mut core = Core::new(&cfg);
+    let mut events = Vec::new();
+    let mut rxs = Vec::new();
+    let mut checked_at_30 = false;
+    while let Some(rec) = reader.next_record().unwrap() {
+        match rec {
+            CaptureRecord::Receiver(d) => {
+                rxs.push(d.clone());
+                core.add_receiver(d);
+            }
+            CaptureRecord::Frame(f) => {
+                if !checked_at_30 && f.arrival >= scenario.start_unix + 30.0 {
+                    checked_at_30 = true;
+                    let sync = &core.mlat().sync;
+                    let valid = sync.pairs().filter(|(_, p)| p.valid(f.arrival, &sync.params)).count();
+                    assert_eq!(valid, 15, "all 15 pairs of 6 receivers synchronised within 30 s");
+                }
+                core.on_frame(f.rx, f.arrival, &f.frame, &mut events);
+            }
+        }
+    }
+    core.finish(&mut events);
+    let sync = &core.mlat().sync;
+    for (&(i, j), p) in sync.pairs() {
+        let ratio = p.residual_rms() / p.expected_rms();
+        eprintln!(
+            "pair {}-{}: drift {:+.2} ppm, residual {:.0} ns, expected {:.0} ns, restarts {}",
+            rxs[i].id,
+            rxs[j].id,
+            p.drift() * 1e6,
+            p.residual_rms() * 1e9,
+            p.expected_rms() * 1e9,
+            p.restarts
+        );
+        assert!(ratio <= 1.2, "pair {i}-{j}: residuals {ratio:.2}x what the noise model predicts");
+        assert_eq!(p.restarts, 0);
+    }
+    // Every fix against the truth and against its geometry's bound (true
+    // timing noise: 83 ns jitter and 12 MHz quantisation).
+    let sigma_true = (83e-9f64.powi(2) + (1.0 / 12e6f64).powi(2) / 12.0).sqrt();
+    let positions: HashMap<&str, [f64; 3]> =
+        rxs.iter().map(|r| (r.id.as_str(), geodetic_to_ecef(r.lat, r.lon, r.alt))).collect();
+    let (mut se, mut crb_trace, mut nees, mut n) = (0.0, 0.0, 0.0, 0);
+    let ids: Vec<String> = rxs.iter().map(|r| r.id.clone()).collect();
+    // Accuracy once synchronised (the first 30 s are the convergence above).
+    for e in &events {
+        let Event::Mlat(f) = e else { continue };
+        if f.t < scenario.start_unix + 30.0 {
+            continue;
+        }
+        n += 1;
+        let err = row_error(&truth, f);
+        se += err[0] * err[0] + err[1] * err[1];
+        nees += mahalanobis2(err, f.cov_en);
+        let pos: Vec<[f64; 3]> = f.receivers.iter().map(|&r| positions[ids[r].as_str()]).collect();
+        let sig = vec![sigma_true; pos.len()];
+        let (la, lo, h) = truth.position(&format!("{:06X}", f.addr), f.t).unwrap();
+        let tp = geodetic_to_ecef(la, lo, h);
+        let c = crb_en(&pos, &sig, Some(75.0), tp).unwrap();
+        crb_trace += c[0][0] + c[1][1];
+    }
+    let rmse = (se / n as f64).sqrt();
+    let crb = (crb_trace / n as f64).sqrt();
+    let nees = nees / n as f64;
+    eprintln!(
+        "{n} fixes: RMSE {rmse:.2} m, Cramer-Rao {crb:.2} m (ratio {:.3}), mean NEES {nees:.2}",
+        rmse / crb
+    );
+    assert!(n >= 300, "{n} fixes");
+    assert!(rmse / crb <= 1.15, "RMSE {rmse} vs CRB {crb}");
+    let band = fuse1090::eval::nees_band(n, 2.0);
+    // Never over-confident; slightly conservative is tolerated (the sync
+    // noise model overestimates the ADS-B position term a little).
+    assert!(nees <= band[1] && nees >= band[0] * 0.85, "NEES {nees} vs {band:?}");
+}
+
+/// East/north error of a fix against the truth interpolated at its time.
+fn row_error(truth: &Truth, f: &fuse1090::mlat::MlatFix) -> [f64; 2] {
+    let p = truth.position(&format!("{:06X}", f.addr), f.t).expect("truth covers the fix");
+    en(p.0, p.1, f.lat, f.lon)
+}
+
+#[test]
+fn a_misplaced_receiver_is_excluded_and_a_restart_does_not_break_mlat() {
+    // tma-busy's receivers, shortened: 40 aircraft for 150 s; rx05 is declared
+    // 300 m off, rx08 restarts at 60 s.
+    let mut s = Scenario::load(&root().join("fixtures/scenarios/tma-busy.toml")).unwrap();
+    s.duration_s = 150.0;
+    s.traffic[0].count = 40;
+    s.traffic[0].mode_s_only = 10;
+    s.traffic[0].spoofers = 0;
+    for r in &mut s.receiver {
+        r.resets_s.retain(|_| false);
+        r.burst_per_min = 0.0;
+    }
+    s.receiver[7].resets_s = vec![60.0];
+    let (capture, truth_bytes) = sim(&s);
+    let truth = Truth::read(&truth_bytes[..]).unwrap();
+    let (core, events, rxs) = run_core(&capture, &CoreConfig::default());
+    let mlat = core.mlat();
+    let health = &mlat.sync.health;
+    assert!(health[7].clock_resets >= 1, "rx08's restart is seen in its timestamps");
+    eprintln!(
+        "health: {:?}",
+        health.iter().map(|h| (h.outlier_rate * 100.0).round() / 100.0).collect::<Vec<_>>()
+    );
+    assert_eq!(rxs[4].id, "rx05");
+    assert!(health[4].excluded, "the receiver declared 300 m off is excluded");
+    for (k, h) in health.iter().enumerate() {
+        if k != 4 {
+            assert!(!h.excluded, "{} wrongly excluded", rxs[k].id);
+        }
+    }
+    // MLAT goes on: fixes after the restart use rx08 again and stay accurate.
+    let mut late_with_rx08 = 0;
+    let mut errs = Vec::new();
+    for e in &events {
+        let Event::Mlat(f) = e else { continue };
+        if f.t > s.start_unix + 100.0 && f.receivers.contains(&7) {
+            late_with_rx08 += 1;
+        }
+        if let Some(p) = truth.position(&format!("{:06X}", f.addr), f.t) {
+            let d = en(p.0, p.1, f.lat, f.lon);
+            errs.push(d[0].hypot(d[1]));
+        }
+    }
+    errs.sort_by(f64::total_cmp);
+    let median = errs[errs.len() / 2];
+    eprintln!(
+        "{} fixes, median error {median:.1} m, {late_with_rx08} late fixes with rx08; {:?}",
+        errs.len(),
+        mlat.stats
+    );
+    assert!(late_with_rx08 > 100);
+    assert!(median < 60.0, "median {median}");
+}
