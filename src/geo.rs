@@ -48,6 +48,33 @@ pub fn ecef_to_geodetic(p: [f64; 3]) -> (f64, f64, f64) {
     (lat.to_degrees(), lon.to_degrees(), h)
 }
 
+/// ECEF to geodetic height and the sines/cosines of latitude and longitude,
+/// by one Bowring iteration: sub-millimetre for heights within 100 km of the
+/// ellipsoid, and a third of the cost of [`ecef_to_geodetic`]. For hot loops
+/// (the MLAT solver's altitude constraint) that need height and the local up
+/// direction.
+#[inline]
+pub fn ecef_height_fast(p: [f64; 3]) -> (f64, [f64; 4]) {
+    let [x, y, z] = p;
+    let r = x.hypot(y);
+    let b = WGS84_A * (1.0 - WGS84_F);
+    let ep2 = (WGS84_A * WGS84_A - b * b) / (b * b);
+    // Parametric latitude, then one Bowring step.
+    let (sb, cb) = {
+        let t = (z * WGS84_A, r * b);
+        let n = t.0.hypot(t.1);
+        (t.0 / n, t.1 / n)
+    };
+    let num = z + ep2 * b * sb * sb * sb;
+    let den = r - WGS84_E2 * WGS84_A * cb * cb * cb;
+    let nn = num.hypot(den);
+    let (sp, cp) = (num / nn, den / nn);
+    let (sl, cl) = if r > 0.0 { (y / r, x / r) } else { (0.0, 1.0) };
+    let n = WGS84_A / (1.0 - WGS84_E2 * sp * sp).sqrt();
+    let h = if cp.abs() > 1e-10 { r / cp - n } else { z.abs() - b };
+    (h, [sp, cp, sl, cl])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -61,6 +88,20 @@ mod tests {
             assert!(
                 (la - lat).abs() < 1e-9 && (lo - lon).abs() < 1e-9 && (hh - h).abs() < 1e-4,
                 "{lat} {lon} {h}"
+            );
+        }
+    }
+
+    #[test]
+    fn fast_height_agrees_below_100_km() {
+        for &(lat, lon, h) in
+            &[(0.0, 0.0, 0.0), (43.6, 1.4, 3000.0), (-70.0, 120.0, 12_000.0), (60.0, -30.0, 95_000.0)]
+        {
+            let (hf, [sp, cp, sl, cl]) = ecef_height_fast(geodetic_to_ecef(lat, lon, h));
+            assert!((hf - h).abs() < 1e-3, "{lat} {h}: {hf}");
+            assert!((sp - lat.to_radians().sin()).abs() < 1e-9 && (cp - lat.to_radians().cos()).abs() < 1e-9);
+            assert!(
+                (sl - lon.to_radians().sin()).abs() < 1e-12 && (cl - lon.to_radians().cos()).abs() < 1e-12
             );
         }
     }

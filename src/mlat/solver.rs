@@ -15,7 +15,7 @@
 
 use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
 
-use crate::geo::{ecef_to_geodetic, geodetic_to_ecef};
+use crate::geo::{ecef_height_fast, ecef_to_geodetic, geodetic_to_ecef};
 
 /// Speed of light in air (the simulator's and the solver's; refractive index 1.0003).
 pub const C_AIR: f64 = 299_792_458.0 / 1.0003;
@@ -149,8 +149,8 @@ fn normal(x: &Vector4<f64>, ms: &[Measurement], t0: f64, alt: Option<AltitudeCon
         chi2 += w * res * res;
     }
     if let Some(c) = alt {
-        let (lat, lon, h) = ecef_to_geodetic([p[0], p[1], p[2]]);
-        let u = up(lat, lon);
+        let (h, [sp, cp, sl, cl]) = ecef_height_fast([p[0], p[1], p[2]]);
+        let u = Vector3::new(cp * cl, cp * sl, sp);
         let res = c.h_m - h;
         let w = 1.0 / (c.sigma_m * c.sigma_m);
         let j = Vector4::new(u[0], u[1], u[2], 0.0);
@@ -256,7 +256,11 @@ pub fn solve(
     let mut best: Option<(Vector4<f64>, Normal, usize)> = None;
     let mut saw_failure = false;
     for start in starts.into_iter().flatten() {
-        if !start.iter().all(|v| v.is_finite()) {
+        // Bancroft's other root is often in space or inside the Earth: skip
+        // starts no aircraft could be at.
+        if !start.iter().all(|v| v.is_finite())
+            || !(-5_000.0..60_000.0).contains(&ecef_height_fast([start[0], start[1], start[2]]).0)
+        {
             continue;
         }
         match refine(start, ms, t0, alt, limits.max_iterations) {
@@ -280,7 +284,8 @@ pub fn solve(
         return Err(Reject::Residual);
     }
     let p = [x[0], x[1], x[2]];
-    let (lat, lon, h) = ecef_to_geodetic(p);
+    let (h, [sp, cp, sl, cl]) = ecef_height_fast(p);
+    let (lat, lon) = (sp.atan2(cp).to_degrees(), sl.atan2(cl).to_degrees());
     if !(limits.min_height_m..=limits.max_height_m).contains(&h) {
         return Err(Reject::Height);
     }
@@ -300,8 +305,6 @@ pub fn solve(
     };
     let gdop = (cov4.fixed_view::<3, 3>(0, 0).trace()).sqrt() / mean_sigma_m;
     // East/north basis at the fix.
-    let (sp, cp) = lat.to_radians().sin_cos();
-    let (sl, cl) = lon.to_radians().sin_cos();
     let e = Vector3::new(-sl, cl, 0.0);
     let nn = Vector3::new(-sp * cl, -sp * sl, cp);
     let cen = [
