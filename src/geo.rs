@@ -55,19 +55,21 @@ pub fn ecef_to_geodetic(p: [f64; 3]) -> (f64, f64, f64) {
 /// direction.
 #[inline]
 pub fn ecef_height_fast(p: [f64; 3]) -> (f64, [f64; 4]) {
+    // Plain square roots: `hypot`'s overflow care costs more than the whole
+    // conversion and Earth-sized numbers cannot overflow.
     let [x, y, z] = p;
-    let r = x.hypot(y);
+    let r = (x * x + y * y).sqrt();
     let b = WGS84_A * (1.0 - WGS84_F);
     let ep2 = (WGS84_A * WGS84_A - b * b) / (b * b);
     // Parametric latitude, then one Bowring step.
     let (sb, cb) = {
         let t = (z * WGS84_A, r * b);
-        let n = t.0.hypot(t.1);
+        let n = (t.0 * t.0 + t.1 * t.1).sqrt();
         (t.0 / n, t.1 / n)
     };
     let num = z + ep2 * b * sb * sb * sb;
     let den = r - WGS84_E2 * WGS84_A * cb * cb * cb;
-    let nn = num.hypot(den);
+    let nn = (num * num + den * den).sqrt();
     let (sp, cp) = (num / nn, den / nn);
     let (sl, cl) = if r > 0.0 { (y / r, x / r) } else { (0.0, 1.0) };
     let n = WGS84_A / (1.0 - WGS84_E2 * sp * sp).sqrt();

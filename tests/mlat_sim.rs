@@ -38,7 +38,9 @@ fn beast12_clocks_synchronise_and_fixes_reach_the_cramer_rao_bound() {
 
     // Drive the core by hand to look at the pairs 30 s in.
     let mut reader = CaptureReader::new(&capture[..], "capture");
-    let cfg = CoreConfig::default();
+    // The fusion scenarios multilaterate every transmission, ADS-B or not.
+    let mut cfg = CoreConfig::default();
+    cfg.mlat.adsb_interval_s = 0.0;
     let mut core = Core::new(&cfg);
     let mut events = Vec::new();
     let mut rxs = Vec::new();

@@ -118,6 +118,7 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
     core.finish(&mut events);
     flush(&mut events, &ids, &mut out)?;
     out.flush().context("writing output")?;
+    eprintln!("{}", core.mlat().report(last, &|k| ids[k].clone()));
     for e in &reader.errors {
         eprintln!("fuse1090: skipped {e}");
     }

@@ -147,10 +147,19 @@ impl PairFilter {
             && now - self.last_update <= params.max_age_s
     }
 
-    /// Offset `t_j - t_i` (s) at local time `tau` and its variance.
+    /// Offset `t_j - t_i` (s) at local time `tau` and its variance (the
+    /// first row of the prediction only: this runs for every pair of every
+    /// multilaterated transmission).
     pub fn offset_at(&self, tau: f64, params: &PairParams) -> (f64, f64) {
-        let (x, p) = self.predicted(tau, params);
-        (x[0], p[(0, 0)])
+        let dt = tau - self.tau;
+        let a = dt.abs();
+        let p = &self.p;
+        let var = p[(0, 0)]
+            + 2.0 * dt * p[(0, 1)]
+            + dt * dt * p[(1, 1)]
+            + params.q_phase * a
+            + params.q_drift * a * a * a / 3.0;
+        (self.x[0] + dt * self.x[1], var)
     }
 
     pub fn drift(&self) -> f64 {

@@ -44,6 +44,11 @@ pub struct MlatConfig {
     /// Learn each receiver's timing bias and noise from the residuals of
     /// over-determined fixes (self-calibration).
     pub calibrate: bool,
+    /// Aircraft that broadcast ADS-B positions are multilaterated at most this
+    /// often (s) to cross-check them and feed their MLAT track; 0 does every
+    /// transmission. Mode S only aircraft always get every transmission, and
+    /// clock synchronisation always uses every ADS-B position.
+    pub adsb_interval_s: f64,
 }
 
 impl Default for MlatConfig {
@@ -59,6 +64,7 @@ impl Default for MlatConfig {
             clock_phase_noise_ns: 0.5,
             clock_drift_walk_ppb: 2.0,
             calibrate: true,
+            adsb_interval_s: 1.0,
         }
     }
 }
@@ -93,6 +99,8 @@ pub struct MlatStats {
     pub excluded_receiver_copies: u64,
     pub close_receivers: u64,
     pub sync_messages: u64,
+    /// ADS-B aircraft groups not multilaterated (interval not yet elapsed).
+    pub adsb_skipped: u64,
     pub fixes: u64,
     pub unverified_address: u64,
     pub rejects: HashMap<&'static str, u64>,
@@ -155,6 +163,8 @@ impl Rx {
 struct AcState {
     alt_ft: Option<(i32, f64)>,
     last_fix: Option<([f64; 3], f64)>,
+    /// Last time an ADS-B position of this aircraft was seen.
+    last_adsb: Option<f64>,
 }
 
 pub struct Mlat {
@@ -210,6 +220,47 @@ impl Mlat {
     /// An altitude heard from an aircraft (any message), for later constraints.
     pub fn note_altitude(&mut self, addr: u32, alt_ft: i32, now: f64) {
         self.aircraft.entry(addr).or_default().alt_ft = Some((alt_ft, now));
+    }
+
+    /// One line of MLAT state: valid pairs, sync residual per receiver (ns),
+    /// fixes, rejects by reason, excluded receivers.
+    pub fn report(&self, now: f64, names: &dyn Fn(usize) -> String) -> String {
+        let params = &self.sync.params;
+        let mut per_rx: Vec<(f64, usize)> = vec![(0.0, 0); self.rxs.len()];
+        let mut valid = 0;
+        let mut total = 0;
+        for (&(i, j), p) in self.sync.pairs() {
+            total += 1;
+            if p.valid(now, params) {
+                valid += 1;
+                for k in [i, j] {
+                    per_rx[k].0 += p.residual_rms();
+                    per_rx[k].1 += 1;
+                }
+            }
+        }
+        let residuals: Vec<String> = per_rx
+            .iter()
+            .enumerate()
+            .filter(|(_, (_, n))| *n > 0)
+            .map(|(k, (s, n))| format!("{}={:.0}", names(k), s / *n as f64 * 1e9))
+            .collect();
+        let excluded: Vec<String> =
+            self.sync.health.iter().enumerate().filter(|(_, h)| h.excluded).map(|(k, _)| names(k)).collect();
+        let mut rejects: Vec<String> = self.stats.rejects.iter().map(|(k, v)| format!("{k}={v}")).collect();
+        rejects.sort();
+        format!(
+            "mlat: {} fixes from {} groups; pairs {valid}/{total} valid; sync residual ns [{}]; rejects [{}]; \
+             excluded [{}]; sync messages {}, outliers {}, restarts {}",
+            self.stats.fixes,
+            self.stats.groups,
+            residuals.join(" "),
+            rejects.join(" "),
+            excluded.join(" "),
+            self.stats.sync_messages,
+            self.sync.stats.outliers,
+            self.sync.stats.restarts
+        )
     }
 
     /// A receiver's timestamp in its local seconds (small numbers, full precision).
@@ -290,6 +341,18 @@ impl Mlat {
         if let Some(a) = info.alt_baro_ft {
             self.note_altitude(info.addr, a, now);
         }
+        if info.adsb_ecef.is_some() {
+            self.aircraft.entry(info.addr).or_default().last_adsb = Some(now);
+        }
+        let ac = self.aircraft.get(&info.addr).copied().unwrap_or_default();
+        if self.cfg.adsb_interval_s > 0.0 && ac.last_adsb.is_some_and(|t| now - t < 10.0) {
+            // An ADS-B aircraft: about every `adsb_interval_s` (transponders
+            // dither their squitters by +/-20%, so allow a quarter early).
+            if ac.last_fix.is_some_and(|(_, t)| now - t < 0.75 * self.cfg.adsb_interval_s) {
+                self.stats.adsb_skipped += 1;
+                return None;
+            }
+        }
         let (times, root) = self.sync.common_time(&copies, now);
         // One measurement per site: receivers closer than the minimum
         // separation add no geometry, so their times are averaged (inverse
@@ -316,7 +379,6 @@ impl Mlat {
             }
         }
         let used: Vec<usize> = sites.iter().flatten().copied().collect();
-        let ac = self.aircraft.get(&info.addr).copied().unwrap_or_default();
         let alt = ac.alt_ft.and_then(|(ft, t)| {
             let age = (now - t).abs();
             (age <= self.cfg.max_alt_age_s).then(|| {
@@ -435,4 +497,124 @@ impl Mlat {
 
 fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::feed::capture::ClockKind;
+    use crate::feed::RawFrame;
+    use crate::mlat::group::{Copy, GroupInfo};
+
+    fn receivers() -> Vec<ReceiverDecl> {
+        [(48.80, 2.30), (48.95, 2.60), (48.60, 2.70), (48.55, 2.10), (49.05, 2.05)]
+            .iter()
+            .enumerate()
+            .map(|(i, &(lat, lon))| ReceiverDecl {
+                id: format!("r{i}"),
+                lat,
+                lon,
+                alt: 100.0,
+                clock: ClockKind::Gps,
+            })
+            .collect()
+    }
+
+    /// A group as GPS-timed receivers would report a DF4 from `target` at `t` (Unix s).
+    fn group(rxs: &[ReceiverDecl], target: [f64; 3], t: f64) -> Group {
+        let copies = rxs
+            .iter()
+            .enumerate()
+            .map(|(i, r)| {
+                let p = geodetic_to_ecef(r.lat, r.lon, r.alt);
+                let toa = t + dist(p, target) / C_AIR;
+                Copy { rx: i, timestamp: ClockKind::gps_timestamp(toa), arrival: t + 0.1, signal: 100 }
+            })
+            .collect();
+        let frame =
+            RawFrame::new(&crate::modes::encode::surveillance_reply(4, 0, 0x1C38, 0xABCDEF, None), 0, 0)
+                .expect("frame");
+        Group {
+            frame,
+            first_arrival: t + 0.1,
+            copies,
+            info: GroupInfo {
+                decoded: true,
+                df: 4,
+                addr: 0xABCDEF,
+                addr_known: true,
+                alt_baro_ft: Some(30_000),
+                ..Default::default()
+            },
+        }
+    }
+
+    fn engine() -> (Mlat, Vec<ReceiverDecl>) {
+        let mut m = Mlat::new(MlatConfig::default());
+        let rxs = receivers();
+        for r in &rxs {
+            m.add_receiver(r);
+        }
+        (m, rxs)
+    }
+
+    #[test]
+    fn a_clean_group_gives_an_accurate_fix() {
+        let (mut m, rxs) = engine();
+        let target = geodetic_to_ecef(48.75, 2.40, 30_000.0 * FT_TO_M);
+        let f = m.on_group(&group(&rxs, target, 1_700_000_000.0), 1_700_000_000.2).expect("fix");
+        assert!(crate::geo::distance_m(f.lat, f.lon, 48.75, 2.40) < 5.0, "{f:?}");
+        assert!((f.t - 1_700_000_000.0).abs() < 1e-6, "emission time from GPS: {}", f.t);
+        assert_eq!(f.receivers.len(), 5);
+    }
+
+    #[test]
+    fn bad_input_is_dropped_and_counted_never_a_fix() {
+        let (mut m, rxs) = engine();
+        let target = geodetic_to_ecef(48.75, 2.40, 9_000.0);
+        let t = 1_700_000_000.0;
+        // Unknown receiver, zero and MLAT-magic timestamps: dropped, counted.
+        let mut g = group(&rxs, target, t);
+        g.copies[0].rx = 99;
+        g.copies[1].timestamp = 0;
+        g.copies[2].timestamp = crate::feed::MLAT_MAGIC_TIMESTAMP;
+        assert!(m.on_group(&g, t).is_none());
+        assert_eq!((m.stats.unknown_receiver, m.stats.no_timing), (1, 2));
+        // Inconsistent geometry: one copy 3 microseconds late is rejected, not fixed.
+        let mut g = group(&rxs, target, t + 1.0);
+        g.copies[3].timestamp =
+            ClockKind::gps_timestamp(ClockKind::gps_unix(g.copies[3].timestamp, t) + 3e-6);
+        assert!(m.on_group(&g, t + 1.0).is_none());
+        assert_eq!(m.stats.rejects.get("residual"), Some(&1));
+        // An address nothing verified, exactly determined: no fix.
+        let mut g = group(&rxs[..3], target, t + 2.0);
+        g.info.addr_known = false;
+        assert!(m.on_group(&g, t + 2.0).is_none());
+        assert_eq!(m.stats.unverified_address, 1);
+        // Two copies only: too few.
+        let g = group(&rxs[..2], target, t + 3.0);
+        assert!(m.on_group(&g, t + 3.0).is_none());
+        assert!(m.stats.too_few_receivers >= 1);
+        assert_eq!(m.stats.fixes, 0);
+    }
+
+    #[test]
+    fn receivers_at_one_site_count_once() {
+        let (mut m, mut rxs) = engine();
+        // A sixth receiver 10 m from r0.
+        let twin = ReceiverDecl {
+            id: "twin".into(),
+            lat: rxs[0].lat + 0.00009,
+            lon: rxs[0].lon,
+            alt: 100.0,
+            clock: ClockKind::Gps,
+        };
+        m.add_receiver(&twin);
+        rxs.push(twin);
+        let target = geodetic_to_ecef(48.75, 2.40, 30_000.0 * FT_TO_M);
+        let f = m.on_group(&group(&rxs, target, 1_700_000_000.0), 1_700_000_000.2).expect("fix");
+        assert_eq!(m.stats.close_receivers, 1);
+        assert_eq!(f.receivers.len(), 6, "both receivers of the site are credited");
+        assert_eq!(f.dof, 2, "but they make one measurement: 5 sites + altitude - 4 unknowns");
+    }
 }

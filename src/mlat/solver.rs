@@ -253,6 +253,7 @@ pub fn solve(
     }
     let dof = n - 4;
     let chi2_limit = if dof > 0 { chi2_quantile(dof, limits.chi2_quantile) } else { f64::INFINITY };
+    let chi2_q90 = if dof > 0 { chi2_quantile(dof, 0.9) } else { f64::INFINITY };
     let mut best: Option<(Vector4<f64>, Normal, usize)> = None;
     let mut saw_failure = false;
     for start in starts.into_iter().flatten() {
@@ -297,7 +298,7 @@ pub fn solve(
     let Some(cov4) = scaled_inverse(&nrm.a) else { return Err(Reject::Singular) };
     // Scale by the residual when it says the sigmas were optimistic (beyond
     // what chance explains), so an honest fix keeps an unbiased covariance.
-    let scale = if dof > 0 && nrm.chi2 > chi2_quantile(dof, 0.9) { nrm.chi2 / dof as f64 } else { 1.0 };
+    let scale = if dof > 0 && nrm.chi2 > chi2_q90 { nrm.chi2 / dof as f64 } else { 1.0 };
     let cov3: Matrix3<f64> = cov4.fixed_view::<3, 3>(0, 0).into_owned() * scale;
     let mean_sigma_m = {
         let s: f64 = ms.iter().map(|m| 1.0 / (C_AIR * m.sigma_t).powi(2)).sum::<f64>() / ms.len() as f64;
@@ -432,9 +433,9 @@ fn refine(
         }
         let cand = x + step;
         let next = normal(&cand, ms, t0, alt);
-        // Converged: a millimetre step. Checked before acceptance, because at
+        // Converged: a centimetre step. Checked before acceptance, because at
         // the optimum chi-square only wobbles in its last digits.
-        if step.fixed_rows::<3>(0).norm() < 1e-3 {
+        if step.fixed_rows::<3>(0).norm() < 1e-2 {
             return Some(if next.chi2 <= cur.chi2 { (cand, next, it) } else { (x, cur, it) });
         }
         if next.chi2 <= cur.chi2 {

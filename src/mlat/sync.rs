@@ -7,6 +7,7 @@
 //! a free-running receiver joins the tree through its pair filters.
 
 use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
 
 use super::clock::{PairFilter, PairParams, Update};
 use super::solver::C_AIR;
@@ -38,9 +39,30 @@ pub struct SyncStats {
     pub restarts: u64,
 }
 
+/// Multiplicative hashing for the pair table's integer keys: SipHash's
+/// flooding resistance buys nothing for receiver indices and costs a lot here.
+#[derive(Default)]
+pub struct PairHasher(u64);
+
+impl Hasher for PairHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0.rotate_left(8) ^ b as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        }
+    }
+    fn write_usize(&mut self, v: usize) {
+        self.0 = (self.0.rotate_left(29) ^ v as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    }
+}
+
+type PairMap = HashMap<(usize, usize), PairFilter, BuildHasherDefault<PairHasher>>;
+
 pub struct ClockSync {
     pub params: PairParams,
-    pairs: HashMap<(usize, usize), PairFilter>,
+    pairs: PairMap,
     clocks: Vec<ClockKind>,
     pub health: Vec<RxHealth>,
     pub stats: SyncStats,
@@ -55,7 +77,7 @@ impl ClockSync {
     pub fn new(params: PairParams) -> Self {
         ClockSync {
             params,
-            pairs: HashMap::new(),
+            pairs: PairMap::default(),
             clocks: Vec::new(),
             health: Vec::new(),
             stats: SyncStats::default(),
@@ -177,19 +199,21 @@ impl ClockSync {
         if n == 0 {
             return (out, 0);
         }
-        // Edge weights once: variance, or None when the pair is not usable.
-        let mut w = vec![vec![None; n]; n];
+        // Edge weights once per pair: offset and variance, or None when the
+        // pair is not usable; the reverse edge is the same relation inverted.
+        let mut w = vec![None; n * n];
         for a in 0..n {
-            for b in 0..n {
-                if a != b {
-                    w[a][b] = self.edge(copies[a].rx, copies[b].rx, copies[a].t, now);
+            for b in a + 1..n {
+                if let Some((off, var)) = self.edge(copies[a].rx, copies[b].rx, copies[a].t, now) {
+                    w[a * n + b] = Some((off, var));
+                    w[b * n + a] = Some((-off, var));
                 }
             }
         }
         let root = (0..n)
             .max_by_key(|&a| {
                 let gps = self.clocks[copies[a].rx] == ClockKind::Gps;
-                let degree = (0..n).filter(|&b| w[a][b].is_some()).count();
+                let degree = (0..n).filter(|&b| w[a * n + b].is_some()).count();
                 (gps as usize, degree, usize::MAX - a)
             })
             .expect("non-empty");
@@ -202,7 +226,7 @@ impl ClockSync {
             for a in (0..n).filter(|&a| in_tree[a]) {
                 for b in (0..n).filter(|&b| !in_tree[b]) {
                     // Edge a -> b: t_b = t_a + offset; we need b's time in root clock.
-                    if let Some((off, var)) = w[a][b] {
+                    if let Some((off, var)) = w[a * n + b] {
                         let acc = out[a].expect("in tree").1 + var;
                         if best.is_none_or(|x| acc < x.3) {
                             best = Some((a, b, off, acc));
