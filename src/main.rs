@@ -52,6 +52,10 @@ enum Command {
         truth: PathBuf,
         #[arg(long)]
         tracks: PathBuf,
+        /// The simulated scenario: MLAT fixes are then also compared with the
+        /// Cramér-Rao bound of their geometry.
+        #[arg(long)]
+        scenario: Option<PathBuf>,
         /// Machine-readable report.
         #[arg(long)]
         json: bool,
@@ -79,7 +83,9 @@ fn main() -> ExitCode {
             cmd::run::run(cmd::run::RunArgs { config, capture, output, source_tracks })
         }
         Command::Sim { scenario, out } => cmd::sim::run(&scenario, &out),
-        Command::Eval { truth, tracks, json } => cmd::eval::run(&truth, &tracks, json),
+        Command::Eval { truth, tracks, scenario, json } => {
+            cmd::eval::run(&truth, &tracks, scenario.as_deref(), json)
+        }
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -183,3 +183,48 @@ fn eval_reports_rows_for_a_simulated_run() {
     let text = String::from_utf8_lossy(&table.stdout);
     assert!(text.contains("h_rmse_m") && text.contains("adsb-report"), "{text}");
 }
+
+#[test]
+fn eval_compares_mlat_fixes_with_their_cramer_rao_bound() {
+    // The 1 Hz benchmark, every transmission multilaterated: GPS-timed
+    // receivers, so the fixes should sit at the bound of their geometry.
+    let dir = root().join("fixtures/captures/fusion-8seg-1hz");
+    let tmpd = tmp("evalcrb");
+    std::fs::write(tmpd.join("all.toml"), "[core.mlat]\nadsb_interval_s = 0.0\n").unwrap();
+    let out = tmpd.join("o.jsonl");
+    let st = fuse1090()
+        .args(["run", "--config"])
+        .arg(tmpd.join("all.toml"))
+        .arg("--capture")
+        .arg(dir.join("capture.txt"))
+        .arg("--output")
+        .arg(&out)
+        .status();
+    assert!(st.unwrap().success());
+    let res = fuse1090()
+        .args(["eval", "--json", "--truth"])
+        .arg(dir.join("truth.jsonl"))
+        .arg("--tracks")
+        .arg(&out)
+        .arg("--scenario")
+        .arg(root().join("fixtures/scenarios/fusion-8seg-1hz.toml"))
+        .output()
+        .unwrap();
+    assert!(res.status.success(), "{}", String::from_utf8_lossy(&res.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&res.stdout).unwrap();
+    let mlat = v["overall"].as_array().unwrap().iter().find(|r| r["source"] == "mlat-fix").expect("mlat row");
+    let (rmse, crb, ratio) = (
+        mlat["h_rmse_m"].as_f64().unwrap(),
+        mlat["crb_m"].as_f64().unwrap(),
+        mlat["crb_ratio"].as_f64().unwrap(),
+    );
+    // The paper's MLAT: 12.65 m; the scenario's timing noise was chosen for it.
+    assert!((crb - 12.65).abs() < 1.0, "bound {crb}");
+    assert!(ratio <= 1.15, "RMSE {rmse} is {ratio}x the bound");
+    let nees = mlat["nees"].as_f64().unwrap();
+    let band = &mlat["nees_band"];
+    assert!(
+        nees >= band[0].as_f64().unwrap() && nees <= band[1].as_f64().unwrap(),
+        "NEES {nees} outside {band}"
+    );
+}

@@ -1,4 +1,4 @@
-//! `fuse1090 eval --truth TRUTH --tracks OUT.jsonl [--json]`.
+//! `fuse1090 eval --truth TRUTH --tracks OUT.jsonl [--scenario FILE] [--json]`.
 
 use std::fs::File;
 use std::io::BufReader;
@@ -6,13 +6,20 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 
-use crate::eval::{evaluate, Truth};
+use crate::eval::{evaluate_with, Geometry, Truth};
+use crate::mlat::MlatConfig;
+use crate::sim::scenario::Scenario;
 
-pub fn run(truth: &Path, tracks: &Path, json: bool) -> Result<()> {
+pub fn run(truth: &Path, tracks: &Path, scenario: Option<&Path>, json: bool) -> Result<()> {
     let open =
         |p: &Path| File::open(p).map(BufReader::new).with_context(|| format!("cannot open {}", p.display()));
     let truth = Truth::read(open(truth)?)?;
-    let report = evaluate(&truth, open(tracks)?)?;
+    // The bound uses the altitude sigma the solver applies to a fresh altitude.
+    let geometry = match scenario {
+        Some(p) => Some(Geometry::from_scenario(&Scenario::load(p)?, MlatConfig::default().baro_sigma_m)),
+        None => None,
+    };
+    let report = evaluate_with(&truth, open(tracks)?, geometry.as_ref())?;
     let text = if json { serde_json::to_string_pretty(&report)? + "\n" } else { report.to_string() };
     super::print_stdout(&text)
 }

@@ -116,6 +116,34 @@ struct Acc {
     h_err: Vec<f64>,
     v_err: Vec<f64>,
     nees: Vec<f64>,
+    /// Horizontal Cramér-Rao variances (trace, m^2) of MLAT fixes.
+    crb: Vec<f64>,
+}
+
+/// Receivers of a simulated world, for the Cramér-Rao bound of MLAT fixes:
+/// true ECEF position and true timing sigma (jitter and quantisation), by id.
+pub struct Geometry {
+    pub receivers: HashMap<String, ([f64; 3], f64)>,
+    /// Sigma of the altitude constraint the solver applies (m).
+    pub alt_sigma_m: f64,
+}
+
+impl Geometry {
+    pub fn from_scenario(s: &crate::sim::scenario::Scenario, alt_sigma_m: f64) -> Geometry {
+        use crate::feed::capture::ClockKind;
+        let receivers = crate::sim::all_receivers(s)
+            .into_iter()
+            .map(|r| {
+                let tick = match r.clock {
+                    ClockKind::Beast12 => 1.0 / 12e6,
+                    ClockKind::Gps => 1e-9,
+                };
+                let sigma = ((r.jitter_ns * 1e-9).powi(2) + tick * tick / 12.0).sqrt();
+                (r.id.clone(), (crate::geo::geodetic_to_ecef(r.lat, r.lon, r.alt_m), sigma))
+            })
+            .collect();
+        Geometry { receivers, alt_sigma_m }
+    }
 }
 
 /// One row of the report.
@@ -134,6 +162,10 @@ pub struct Row {
     pub continuity: f64,
     pub breaks: usize,
     pub false_tracks: usize,
+    /// MLAT fixes, given the scenario: RMS of the Cramér-Rao bound of each
+    /// fix's geometry (m) and the RMSE's ratio to it.
+    pub crb_m: Option<f64>,
+    pub crb_ratio: Option<f64>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -189,6 +221,11 @@ fn coverage(times: &mut [f64], span: (f64, f64)) -> (f64, usize) {
 
 /// Evaluates the records of a track stream against the truth.
 pub fn evaluate(truth: &Truth, records: impl BufRead) -> Result<Report> {
+    evaluate_with(truth, records, None)
+}
+
+/// As [`evaluate`], with the receivers' geometry for the MLAT rows' bound.
+pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geometry>) -> Result<Report> {
     // (source, hex, track id) -> accumulated errors.
     let mut accs: BTreeMap<(String, String, String), Acc> = BTreeMap::new();
     let mut unknown = 0;
@@ -230,6 +267,15 @@ pub fn evaluate(truth: &Truth, records: impl BufRead) -> Result<Report> {
         if let Some(alt) = v["alt_m"].as_f64() {
             acc.v_err.push(alt - tp.alt);
         }
+        if let (Some(g), Some(ids)) = (geometry, v["receivers"].as_array()) {
+            let (pos, sig): (Vec<[f64; 3]>, Vec<f64>) =
+                ids.iter().filter_map(|id| g.receivers.get(id.as_str()?)).copied().unzip();
+            let alt = v["altitude_used"].as_bool().unwrap_or(false).then_some(g.alt_sigma_m);
+            let truth_ecef = crate::geo::geodetic_to_ecef(tp.lat, tp.lon, tp.alt);
+            if let Some(c) = crate::mlat::solver::crb_en(&pos, &sig, alt, truth_ecef) {
+                acc.crb.push(c[0][0] + c[1][1]);
+            }
+        }
         if let Some(c) = v["cov_en"].as_array() {
             let g = |r: usize, k: usize| c.get(r).and_then(|x| x.get(k)).and_then(Value::as_f64);
             if let (Some(a), Some(b), Some(cc), Some(d)) = (g(0, 0), g(0, 1), g(1, 0), g(1, 1)) {
@@ -250,6 +296,7 @@ pub fn evaluate(truth: &Truth, records: impl BufRead) -> Result<Report> {
         e.0.h_err.extend(acc.h_err);
         e.0.v_err.extend(acc.v_err);
         e.0.nees.extend(acc.nees);
+        e.0.crb.extend(acc.crb);
     }
     let make_row =
         |source: &str, hex: &str, aircraft: usize, acc: &Acc, cont: f64, breaks: usize, false_tracks| Row {
@@ -265,6 +312,9 @@ pub fn evaluate(truth: &Truth, records: impl BufRead) -> Result<Report> {
             continuity: cont,
             breaks,
             false_tracks,
+            crb_m: (!acc.crb.is_empty()).then(|| (acc.crb.iter().sum::<f64>() / acc.crb.len() as f64).sqrt()),
+            crb_ratio: (!acc.crb.is_empty() && acc.crb.len() == acc.h_err.len())
+                .then(|| rms(&acc.h_err) / (acc.crb.iter().sum::<f64>() / acc.crb.len() as f64).sqrt()),
         };
     let mut aircraft_rows = Vec::new();
     let mut overall: BTreeMap<String, (Acc, usize, f64, usize, usize)> = BTreeMap::new();
@@ -276,6 +326,7 @@ pub fn evaluate(truth: &Truth, records: impl BufRead) -> Result<Report> {
         o.0.h_err.extend(&acc.h_err);
         o.0.v_err.extend(&acc.v_err);
         o.0.nees.extend(&acc.nees);
+        o.0.crb.extend(&acc.crb);
         o.1 += 1;
         o.2 += cont;
         o.3 += breaks;
@@ -297,7 +348,7 @@ fn fmt_opt(v: Option<f64>, prec: usize) -> String {
 impl std::fmt::Display for Report {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let header = format!(
-            "{:<18} {:>6} {:>8} {:>9} {:>8} {:>8} {:>7} {:>15} {:>6} {:>6} {:>5}",
+            "{:<18} {:>6} {:>8} {:>9} {:>8} {:>8} {:>7} {:>15} {:>6} {:>6} {:>5} {:>15}",
             "source",
             "hex",
             "n",
@@ -308,11 +359,12 @@ impl std::fmt::Display for Report {
             "nees_95%",
             "cont",
             "breaks",
-            "false"
+            "false",
+            "crb_m (ratio)"
         );
         let line = |r: &Row| {
             format!(
-                "{:<18} {:>6} {:>8} {:>9.2} {:>8.2} {:>8} {:>7} {:>15} {:>6.3} {:>6} {:>5}",
+                "{:<18} {:>6} {:>8} {:>9.2} {:>8.2} {:>8} {:>7} {:>15} {:>6.3} {:>6} {:>5} {:>15}",
                 r.source,
                 if r.hex == "all" { format!("{} ac", r.aircraft) } else { r.hex.clone() },
                 r.n,
@@ -323,7 +375,11 @@ impl std::fmt::Display for Report {
                 r.nees_band.map_or("-".into(), |b| format!("[{:.2}, {:.2}]", b[0], b[1])),
                 r.continuity,
                 r.breaks,
-                r.false_tracks
+                r.false_tracks,
+                match (r.crb_m, r.crb_ratio) {
+                    (Some(c), Some(k)) => format!("{c:.2} ({k:.2}x)"),
+                    _ => "-".into(),
+                }
             )
         };
         writeln!(f, "{header}")?;

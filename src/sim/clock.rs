@@ -15,7 +15,10 @@ use crate::feed::capture::ClockKind;
 
 pub struct ClockModel {
     kind: ClockKind,
-    start_unix: f64,
+    /// The start's second of the day: adding scenario time to this small
+    /// number keeps nanoseconds, which Unix time near 1.7e9 s in an f64 (a
+    /// 240 ns step) would not.
+    start_sod: f64,
     offset_ticks: f64,
     /// Phase error (s) accumulated by whole seconds since the start, and the
     /// frequency error (fractional) within each second.
@@ -48,7 +51,7 @@ impl ClockModel {
         let reset_offsets = resets.iter().map(|_| rng.gen_range(0.0..12e6)).collect();
         ClockModel {
             kind: r.clock,
-            start_unix,
+            start_sod: start_unix.rem_euclid(86_400.0),
             offset_ticks,
             phase_s,
             freq,
@@ -72,7 +75,7 @@ impl ClockModel {
             0.0
         };
         match self.kind {
-            ClockKind::Gps => ClockKind::gps_timestamp(self.start_unix + t + jitter),
+            ClockKind::Gps => ClockKind::gps_timestamp(self.start_sod + t + jitter),
             ClockKind::Beast12 => {
                 // Since the last restart (or the start), the counter runs from its offset.
                 let (since, offset) = match self.resets.iter().rposition(|&r| r <= t) {
@@ -115,10 +118,14 @@ mod tests {
     }
 
     #[test]
-    fn gps_is_time_of_day() {
+    fn gps_is_time_of_day_to_the_nanosecond() {
         let mut rng = ChaCha8Rng::seed_from_u64(1);
         let c = ClockModel::new(&receiver(ClockKind::Gps), 1_590_969_600.0, 100.0, &mut rng);
         let ts = c.timestamp(12.5, &mut rng);
-        assert!((ClockKind::gps_unix(ts, 1_590_969_612.0) - 1_590_969_612.5).abs() < 1e-9);
+        assert!((ClockKind::gps_unix(ts, 1_590_969_612.0) - 1_590_969_612.5).abs() < 1e-6);
+        // Nanoseconds survive: 1 ns apart in, 1 ns apart out.
+        let a = c.timestamp(12.000_000_100, &mut rng) & 0x3FFF_FFFF;
+        let b = c.timestamp(12.000_000_101, &mut rng) & 0x3FFF_FFFF;
+        assert_eq!((a, b - a), (100, 1));
     }
 }

@@ -76,8 +76,8 @@ fn random_in_disk(r: &mut ChaCha8Rng, lat: f64, lon: f64, radius_km: f64) -> (f6
     (la, lo)
 }
 
-/// Expands receiver fields into receivers.
-fn all_receivers(s: &Scenario) -> Vec<Receiver> {
+/// Every receiver of a scenario, receiver fields expanded (deterministic).
+pub fn all_receivers(s: &Scenario) -> Vec<Receiver> {
     let mut out = s.receiver.clone();
     for (k, f) in s.receiver_field.iter().enumerate() {
         let mut r = rng(s.seed, 1_000_000 + k as u64);
