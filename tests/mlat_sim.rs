@@ -131,7 +131,8 @@ fn a_misplaced_receiver_is_excluded_and_a_restart_does_not_break_mlat() {
     s.duration_s = 150.0;
     s.traffic[0].count = 40;
     s.traffic[0].mode_s_only = 10;
-    s.traffic[0].spoofers = 0;
+    // Two spoofers (2 km and 300 m off): the last two aircraft.
+    s.traffic[0].spoofers = 2;
     for r in &mut s.receiver {
         r.resets_s.retain(|_| false);
         r.burst_per_min = 0.0;
@@ -176,4 +177,12 @@ fn a_misplaced_receiver_is_excluded_and_a_restart_does_not_break_mlat() {
     );
     assert!(late_with_rx08 > 100);
     assert!(median < 60.0, "median {median}");
+    // Aircraft health: the spoofers' positions disagree with the timing and
+    // stop being sync sources; no honest aircraft does.
+    let first = s.traffic[0].first_hex;
+    let rates: Vec<(u32, f64)> =
+        (0..40).filter_map(|i| mlat.sync_nis(first + i).map(|r| (i, (r * 100.0).round() / 100.0))).collect();
+    eprintln!("sync source mean NIS: {rates:?}");
+    let banned: Vec<u32> = (0..40).map(|i| first + i).filter(|&a| mlat.sync_banned(a)).collect();
+    assert_eq!(banned, vec![first + 38, first + 39], "sync sources refused");
 }

@@ -67,6 +67,8 @@ pub struct PairFilter {
     /// Exponential mean of squared innovations (s^2) and of their variances, for stats.
     innov2: f64,
     innov_var: f64,
+    /// Normalised innovation squared of the last measurement offered.
+    pub last_nis: f64,
 }
 
 impl PairFilter {
@@ -82,6 +84,7 @@ impl PairFilter {
             restarts: 0,
             innov2: 0.0,
             innov_var: 0.0,
+            last_nis: 1.0,
         }
     }
 
@@ -116,6 +119,7 @@ impl PairFilter {
         let y = z - x[0];
         let s = p[(0, 0)] + r;
         let nis = y * y / s;
+        self.last_nis = nis;
         if self.updates >= 2 && nis > params.gate {
             self.outliers += 1;
             self.outlier_run += 1;
@@ -160,6 +164,11 @@ impl PairFilter {
             + params.q_phase * a
             + params.q_drift * a * a * a / 3.0;
         (self.x[0] + dt * self.x[1], var)
+    }
+
+    /// The offset at the time of the last update.
+    pub fn offset(&self) -> f64 {
+        self.x[0]
     }
 
     pub fn drift(&self) -> f64 {

@@ -41,6 +41,11 @@ pub struct MlatConfig {
     /// per square-root second). Smaller values average sync measurements longer.
     pub clock_phase_noise_ns: f64,
     pub clock_drift_walk_ppb: f64,
+    /// Where each clock type's timestamp sits in the frame, relative to the
+    /// start of the preamble (ns); subtracted so every receiver's time refers
+    /// to the same point of the frame.
+    pub timestamp_offset_beast12_ns: f64,
+    pub timestamp_offset_gps_ns: f64,
     /// Learn each receiver's timing bias and noise from the residuals of
     /// over-determined fixes (self-calibration).
     pub calibrate: bool,
@@ -63,6 +68,8 @@ impl Default for MlatConfig {
             min_sync_nacp: 6,
             clock_phase_noise_ns: 0.5,
             clock_drift_walk_ppb: 2.0,
+            timestamp_offset_beast12_ns: 0.0,
+            timestamp_offset_gps_ns: 0.0,
             calibrate: true,
             adsb_interval_s: 1.0,
         }
@@ -101,6 +108,11 @@ pub struct MlatStats {
     pub sync_messages: u64,
     /// ADS-B aircraft groups not multilaterated (interval not yet elapsed).
     pub adsb_skipped: u64,
+    /// Copies dropped as outliers so the rest of a transmission could be fixed.
+    pub outliers_dropped: u64,
+    /// Aircraft currently not trusted as sync sources, and the positions refused.
+    pub sync_banned_aircraft: u64,
+    pub sync_refused: u64,
     pub fixes: u64,
     pub unverified_address: u64,
     pub rejects: HashMap<&'static str, u64>,
@@ -135,6 +147,9 @@ const CAL_MEMORY: f64 = 200.0;
 /// A receiver clock that disagrees with the server's clock by more than this
 /// (s) between two frames has jumped. Network delays vary by far less.
 const CLOCK_JUMP_S: f64 = 5.0;
+/// Mean normalised innovation beyond which an aircraft is no longer a sync
+/// source (honest ones average about 1).
+const SYNC_SOURCE_MAX_NIS: f64 = 6.0;
 /// Step of the bias estimate towards each residual.
 const CAL_STEP: f64 = 0.05;
 
@@ -165,6 +180,12 @@ struct AcState {
     last_fix: Option<([f64; 3], f64)>,
     /// Last time an ADS-B position of this aircraft was seen.
     last_adsb: Option<f64>,
+    /// Recent mean normalised innovation of the sync measurements its ADS-B
+    /// positions made: an aircraft whose positions disagree with the timing
+    /// (bad GPS, spoofing) stops being a sync source.
+    sync_outlier_rate: f64,
+    sync_uses: u32,
+    sync_banned: bool,
 }
 
 pub struct Mlat {
@@ -263,8 +284,17 @@ impl Mlat {
         )
     }
 
-    /// A receiver's timestamp in its local seconds (small numbers, full precision).
+    /// A receiver's timestamp in its local seconds (small numbers, full
+    /// precision), referred to the start of the frame's preamble.
     fn local_time(&mut self, rx: usize, ts: u64, arrival: f64) -> f64 {
+        let refer = match self.rxs[rx].clock {
+            ClockKind::Beast12 => self.cfg.timestamp_offset_beast12_ns,
+            ClockKind::Gps => self.cfg.timestamp_offset_gps_ns,
+        } * 1e-9;
+        self.raw_local_time(rx, ts, arrival) - refer
+    }
+
+    fn raw_local_time(&mut self, rx: usize, ts: u64, arrival: f64) -> f64 {
         match self.rxs[rx].clock {
             ClockKind::Gps => {
                 let sod_ns = (ts >> 30) as i64 * 1_000_000_000 + (ts & 0x3FFF_FFFF) as i64;
@@ -336,7 +366,12 @@ impl Mlat {
             return None;
         }
         if let (Some(p), false) = (info.adsb_ecef, info.suspect) {
-            self.sync_from(&copies, p, info.adsb_sigma_m, now);
+            if self.aircraft.get(&info.addr).is_some_and(|a| a.sync_banned) {
+                self.stats.sync_refused += 1;
+            } else {
+                let (nis_sum, judged) = self.sync_from(&copies, p, info.adsb_sigma_m, now);
+                self.judge_sync_source(info.addr, nis_sum, judged);
+            }
         }
         if let Some(a) = info.alt_baro_ft {
             self.note_altitude(info.addr, a, now);
@@ -378,7 +413,6 @@ impl Mlat {
                 }
             }
         }
-        let used: Vec<usize> = sites.iter().flatten().copied().collect();
         let alt = ac.alt_ft.and_then(|(ft, t)| {
             let age = (now - t).abs();
             (age <= self.cfg.max_alt_age_s).then(|| {
@@ -395,13 +429,14 @@ impl Mlat {
             return None;
         }
         let guess = ac.last_fix.filter(|(_, t)| (now - t).abs() < 30.0).map(|(p, _)| p);
-        let fix = match solve(&ms, alt, guess, &self.limits) {
+        let fix = match self.solve_robust(&mut ms, &mut sites, alt, guess) {
             Ok(f) => f,
             Err(why) => {
                 self.reject(why);
                 return None;
             }
         };
+        let used: Vec<usize> = sites.iter().flatten().copied().collect();
         if !info.addr_known && fix.dof == 0 {
             // Nothing checks an unverified address: no fix from it.
             self.stats.unverified_address += 1;
@@ -438,6 +473,44 @@ impl Mlat {
         })
     }
 
+    /// Solves; when the residual test fails and enough sites remain, the site
+    /// with the largest normalised residual is dropped and the fix tried
+    /// again (a receiver glitch, multipath, or a receiver not yet found out
+    /// must not cost the whole transmission).
+    fn solve_robust(
+        &mut self,
+        ms: &mut Vec<Measurement>,
+        sites: &mut Vec<Vec<usize>>,
+        alt: Option<AltitudeConstraint>,
+        guess: Option<[f64; 3]>,
+    ) -> Result<super::solver::Fix, Reject> {
+        let mut result = solve(ms, alt, guess, &self.limits);
+        for _ in 0..2 {
+            // Only while the rest stays checked: at least two degrees of
+            // freedom after the drop (with fewer, which copy is bad is a guess).
+            if result != Err(Reject::Residual) || ms.len() + alt.is_some() as usize - 1 < 4 + 2 {
+                break;
+            }
+            // Residuals at the least-squares solution, ignoring the test.
+            let lim = SolverLimits { chi2_quantile: 1.0, ..self.limits };
+            let Ok(f) = solve(ms, alt, guess, &lim) else { break };
+            let res = super::solver::residuals(ms, alt, &f);
+            let worst = res
+                .iter()
+                .zip(ms.iter())
+                .map(|((r, h), m)| (r / m.sigma_t).abs() / (1.0 - h).max(0.05).sqrt())
+                .enumerate()
+                .max_by(|a, b| a.1.total_cmp(&b.1))
+                .map(|(k, _)| k);
+            let Some(k) = worst else { break };
+            ms.remove(k);
+            sites.remove(k);
+            self.stats.outliers_dropped += 1;
+            result = solve(ms, alt, guess, &self.limits);
+        }
+        result
+    }
+
     /// Self-calibration: a residual divided by `1 - leverage` is an unbiased
     /// look at the receiver's own timing error; its mean is the receiver's
     /// bias, its spread the receiver's noise. A bias common to all receivers
@@ -469,7 +542,41 @@ impl Mlat {
         }
     }
 
-    fn sync_from(&mut self, copies: &[LocalCopy], p: [f64; 3], sigma_pos: f64, now: f64) {
+    /// Aircraft health: the mean normalised innovation of a source's sync
+    /// measurements against converged pairs is about 1 for an honest
+    /// aircraft (less, as the noise model is a little generous); a position
+    /// offset shows as a consistent bias and drives it far up. Past the
+    /// threshold the aircraft is no longer a sync source (for good: a
+    /// spoofer does not become honest).
+    fn judge_sync_source(&mut self, addr: u32, nis_sum: f64, judged: u32) {
+        if judged == 0 {
+            return;
+        }
+        let a = self.aircraft.entry(addr).or_default();
+        let mean = nis_sum / judged as f64;
+        a.sync_uses += 1;
+        a.sync_outlier_rate += (mean - a.sync_outlier_rate) / (a.sync_uses.min(20) as f64);
+        if !a.sync_banned && a.sync_uses >= 10 && a.sync_outlier_rate > SYNC_SOURCE_MAX_NIS {
+            a.sync_banned = true;
+            self.stats.sync_banned_aircraft += 1;
+            tracing::warn!(
+                aircraft = format!("{addr:06X}"),
+                "ADS-B positions disagree with the timing: not used for sync"
+            );
+        }
+    }
+
+    /// Recent mean normalised innovation of an aircraft's sync measurements.
+    pub fn sync_nis(&self, addr: u32) -> Option<f64> {
+        self.aircraft.get(&addr).filter(|a| a.sync_uses > 0).map(|a| a.sync_outlier_rate)
+    }
+
+    /// Whether an aircraft's ADS-B positions are refused as sync sources.
+    pub fn sync_banned(&self, addr: u32) -> bool {
+        self.aircraft.get(&addr).is_some_and(|a| a.sync_banned)
+    }
+
+    fn sync_from(&mut self, copies: &[LocalCopy], p: [f64; 3], sigma_pos: f64, now: f64) -> (f64, u32) {
         self.stats.sync_messages += 1;
         let n = copies.len();
         let ranges: Vec<f64> = copies.iter().map(|c| dist(self.rxs[c.rx].ecef, p)).collect();
@@ -491,7 +598,7 @@ impl Mlat {
                 geom[a][b] = sigma_pos * sigma_pos * d2 / (C_AIR * C_AIR);
             }
         }
-        self.sync.observe(copies, &ranges, &var, &geom, now);
+        self.sync.observe(copies, &ranges, &var, &geom, now)
     }
 }
 
@@ -521,13 +628,21 @@ mod tests {
     }
 
     /// A group as GPS-timed receivers would report a DF4 from `target` at `t` (Unix s).
+    /// Shifts a copy's timestamp by `dt` seconds.
+    fn delay(c: &mut Copy, dt: f64) {
+        let ns =
+            (c.timestamp >> 30) * 1_000_000_000 + (c.timestamp & 0x3FFF_FFFF) + (dt * 1e9).round() as u64;
+        c.timestamp = ((ns / 1_000_000_000) << 30) | (ns % 1_000_000_000);
+    }
+
     fn group(rxs: &[ReceiverDecl], target: [f64; 3], t: f64) -> Group {
         let copies = rxs
             .iter()
             .enumerate()
             .map(|(i, r)| {
                 let p = geodetic_to_ecef(r.lat, r.lon, r.alt);
-                let toa = t + dist(p, target) / C_AIR;
+                // From the second of the day: Unix time in an f64 has 240 ns steps.
+                let toa = t.rem_euclid(86_400.0) + dist(p, target) / C_AIR;
                 Copy { rx: i, timestamp: ClockKind::gps_timestamp(toa), arrival: t + 0.1, signal: 100 }
             })
             .collect();
@@ -563,7 +678,7 @@ mod tests {
         let (mut m, rxs) = engine();
         let target = geodetic_to_ecef(48.75, 2.40, 30_000.0 * FT_TO_M);
         let f = m.on_group(&group(&rxs, target, 1_700_000_000.0), 1_700_000_000.2).expect("fix");
-        assert!(crate::geo::distance_m(f.lat, f.lon, 48.75, 2.40) < 5.0, "{f:?}");
+        assert!(crate::geo::distance_m(f.lat, f.lon, 48.75, 2.40) < 1.0, "{f:?}");
         assert!((f.t - 1_700_000_000.0).abs() < 1e-6, "emission time from GPS: {}", f.t);
         assert_eq!(f.receivers.len(), 5);
     }
@@ -596,6 +711,26 @@ mod tests {
         assert!(m.on_group(&g, t + 3.0).is_none());
         assert!(m.stats.too_few_receivers >= 1);
         assert_eq!(m.stats.fixes, 0);
+    }
+
+    #[test]
+    fn one_bad_copy_among_many_is_dropped_and_the_rest_fixed() {
+        let mut m = Mlat::new(MlatConfig::default());
+        let mut rxs = receivers();
+        for (i, &(lat, lon)) in [(49.2, 2.3), (48.4, 2.4)].iter().enumerate() {
+            rxs.push(ReceiverDecl { id: format!("x{i}"), lat, lon, alt: 100.0, clock: ClockKind::Gps });
+        }
+        for r in &rxs {
+            m.add_receiver(r);
+        }
+        let target = geodetic_to_ecef(48.75, 2.40, 30_000.0 * FT_TO_M);
+        let t = 1_700_000_000.0;
+        let mut g = group(&rxs, target, t);
+        delay(&mut g.copies[3], 3e-6);
+        let f = m.on_group(&g, t).expect("fix from the six good copies");
+        assert_eq!(m.stats.outliers_dropped, 1);
+        assert!(!f.receivers.contains(&3), "the bad copy is not in the fix");
+        assert!(crate::geo::distance_m(f.lat, f.lon, 48.75, 2.40) < 5.0);
     }
 
     #[test]

@@ -252,7 +252,11 @@ pub fn solve(
         starts[3] = Some(Vector4::new(p[0], p[1], p[2], b_for(p)));
     }
     let dof = n - 4;
-    let chi2_limit = if dof > 0 { chi2_quantile(dof, limits.chi2_quantile) } else { f64::INFINITY };
+    let chi2_limit = if dof > 0 && limits.chi2_quantile < 1.0 {
+        chi2_quantile(dof, limits.chi2_quantile)
+    } else {
+        f64::INFINITY
+    };
     let chi2_q90 = if dof > 0 { chi2_quantile(dof, 0.9) } else { f64::INFINITY };
     let mut best: Option<(Vector4<f64>, Normal, usize)> = None;
     let mut saw_failure = false;

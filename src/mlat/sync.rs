@@ -96,7 +96,10 @@ impl ClockSync {
     /// A transmission from a known position heard by several receivers: one
     /// measurement for every pair. `ranges` are emitter-receiver distances
     /// (m), `var` each copy's timing variance plus its share of the
-    /// emitter's position error (s^2).
+    /// emitter's position error (s^2). Returns the summed normalised
+    /// innovation (each capped at 100) of the pair measurements that met a
+    /// converged filter, and how many those were, so the caller can judge the
+    /// emitter too.
     pub fn observe(
         &mut self,
         copies: &[LocalCopy],
@@ -104,7 +107,8 @@ impl ClockSync {
         var: &[f64],
         geom_var: &[Vec<f64>],
         now: f64,
-    ) {
+    ) -> (f64, u32) {
+        let (mut nis_sum, mut judged) = (0.0, 0);
         for a in 0..copies.len() {
             for b in a + 1..copies.len() {
                 let (ca, cb) = (copies[a], copies[b]);
@@ -134,11 +138,16 @@ impl ClockSync {
                     Update::Accepted => {}
                 }
                 let outlier = result != Update::Accepted;
+                if let Some(f) = self.pairs.get(&(i, j)).filter(|f| f.updates > params.min_updates * 2) {
+                    nis_sum += f.last_nis.min(100.0);
+                    judged += 1;
+                }
                 for rx in [i, j] {
                     self.note_health(rx, outlier);
                 }
             }
         }
+        (nis_sum, judged)
     }
 
     /// A receiver's clock jumped (restart): its pairs start again, and the
@@ -182,9 +191,14 @@ impl ClockSync {
             Some(f.offset_at(t_i, &self.params))
         } else {
             let f = self.pairs.get(&(j, i)).filter(|f| f.valid(now, &self.params))?;
-            // t_i = t_j + offset(t_j): invert around t_j ~ t_i - offset.
-            let (o0, _) = f.offset_at(t_i, &self.params);
-            let (o, v) = f.offset_at(t_i - o0, &self.params);
+            // The filter relates t_i = t_j + offset(t_j), its time argument
+            // in j's clock: solve tau = t_i - offset(tau) by fixed point from
+            // the filter's current offset (a contraction by the drift, ~1e-4).
+            let mut tau = t_i - f.offset();
+            for _ in 0..2 {
+                tau = t_i - f.offset_at(tau, &self.params).0;
+            }
+            let (o, v) = f.offset_at(tau, &self.params);
             Some((-o, v))
         }
     }
@@ -248,6 +262,37 @@ impl ClockSync {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn inverse_edges_hold_across_distant_epochs_and_large_drift() {
+        // Receiver 1's clock runs 100 ppm fast and its local time is 5,000 s
+        // ahead of receiver 0's: converting 1 -> 0 must not depend on which
+        // index is lower.
+        let mut s = ClockSync::new(PairParams::default());
+        s.add_receiver(ClockKind::Beast12);
+        s.add_receiver(ClockKind::Beast12);
+        let clock1 = |t0: f64| 5000.0 + t0 * (1.0 + 100e-6);
+        let g = vec![vec![0.0; 2]; 2];
+        for k in 0..20 {
+            let t0 = 100.0 + k as f64 * 0.5;
+            s.observe(
+                &[LocalCopy { rx: 0, t: t0 }, LocalCopy { rx: 1, t: clock1(t0) }],
+                &[0.0; 2],
+                &[1e-18; 2],
+                &g,
+                t0,
+            );
+        }
+        let t0 = 111.0;
+        for copies in [
+            [LocalCopy { rx: 0, t: t0 }, LocalCopy { rx: 1, t: clock1(t0) }],
+            [LocalCopy { rx: 1, t: clock1(t0) }, LocalCopy { rx: 0, t: t0 }],
+        ] {
+            let (times, root) = s.common_time(&copies, t0);
+            let (a, b) = (times[0].unwrap().0, times[1].unwrap().0);
+            assert!((a - b).abs() < 1e-9, "root {root}: {a} vs {b}");
+        }
+    }
 
     #[test]
     fn a_chain_of_pairs_puts_everyone_on_the_gps_clock() {
