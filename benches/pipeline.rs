@@ -2,7 +2,8 @@
 //! receivers, 3,000 aircraft), cut to its first 10 s so one iteration stays
 //! around a second: 1.2 M frames.
 //! - `core`: frames already parsed, through the sans-IO core (frames/s);
-//! - `capture`: capture text parsed and run through the core, as `run --capture` does.
+//! - `run_capture`: the `run --capture` command itself (file in, parsing on a
+//!   second thread, core, JSON lines out).
 //!
 //! Run: `cargo bench --bench pipeline`.
 
@@ -19,24 +20,6 @@ fn capture() -> Vec<u8> {
     let mut cap = Vec::new();
     simulate(&s, &mut cap, std::io::sink()).unwrap();
     cap
-}
-
-fn run(core: &mut Core, text: &[u8]) -> u64 {
-    let mut reader = CaptureReader::new(text, "scale");
-    let mut events = Vec::new();
-    while let Some(rec) = reader.next_record().unwrap() {
-        match rec {
-            CaptureRecord::Receiver(d) => {
-                core.add_receiver(d);
-            }
-            CaptureRecord::Frame(f) => {
-                core.on_frame(f.rx, f.arrival, &f.frame, &mut events);
-                events.clear();
-            }
-        }
-    }
-    core.finish(&mut events);
-    core.stats().frames
 }
 
 fn bench(c: &mut Criterion) {
@@ -70,8 +53,16 @@ fn bench(c: &mut Criterion) {
             core.stats().positions
         })
     });
-    g.bench_function("capture", |b| b.iter(|| run(&mut Core::new(&CoreConfig::default()), &text)));
+    let dir = std::env::temp_dir().join(format!("fuse1090-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (cap, out) = (dir.join("capture.txt"), dir.join("out.jsonl"));
+    std::fs::write(&cap, &text).unwrap();
+    let cfg = fuse1090::config::Config::default();
+    g.bench_function("run_capture", |b| {
+        b.iter(|| fuse1090::cmd::run::run_capture(&cfg, &cap, &out).unwrap().frames)
+    });
     g.finish();
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 criterion_group!(benches, bench);

@@ -81,13 +81,36 @@ pub fn run(args: RunArgs) -> Result<()> {
     }
 }
 
+/// Records per batch handed from the parsing thread to the core.
+const BATCH: usize = 4096;
+
 /// Runs a capture file through the core and writes the event stream.
+///
+/// Two threads, as the machine has two cores: one parses the capture into
+/// batches, the other runs the core and writes. Batches keep the file's
+/// order, so the output is the same bytes as a single-threaded run.
 pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summary> {
     let started = Instant::now();
     let file = File::open(capture).with_context(|| format!("cannot open {}", capture.display()))?;
-    let mut reader =
-        CaptureReader::new(BufReader::with_capacity(1 << 20, file), capture.display().to_string());
     let out_file = File::create(output).with_context(|| format!("cannot create {}", output.display()))?;
+    let name = capture.display().to_string();
+    let (tx, rx) = std::sync::mpsc::sync_channel::<Vec<CaptureRecord>>(8);
+    let parser = std::thread::spawn(move || -> Result<(u64, Vec<crate::feed::capture::LineError>)> {
+        let mut reader = CaptureReader::new(BufReader::with_capacity(1 << 20, file), name.clone());
+        let mut batch = Vec::with_capacity(BATCH);
+        while let Some(rec) = reader.next_record().with_context(|| format!("reading {name}"))? {
+            batch.push(rec);
+            if batch.len() == BATCH
+                && tx.send(std::mem::replace(&mut batch, Vec::with_capacity(BATCH))).is_err()
+            {
+                break;
+            }
+        }
+        if !batch.is_empty() {
+            let _ = tx.send(batch);
+        }
+        Ok((reader.skipped, reader.errors))
+    });
     let mut out = BufWriter::with_capacity(1 << 20, out_file);
     let mut core = Core::new(&cfg.core);
     let mut ids: Vec<String> = Vec::new();
@@ -99,31 +122,32 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
         }
         Ok(())
     };
-    while let Some(rec) = reader.next_record().with_context(|| format!("reading {}", capture.display()))? {
-        match rec {
-            CaptureRecord::Receiver(decl) => {
-                ids.push(decl.id.clone());
-                core.add_receiver(decl);
-            }
-            CaptureRecord::Frame(f) => {
-                first = first.min(f.arrival);
-                last = last.max(f.arrival);
-                core.on_frame(f.rx, f.arrival, &f.frame, &mut events);
-                if events.len() >= 1024 {
-                    flush(&mut events, &ids, &mut out)?;
+    for batch in rx {
+        for rec in batch {
+            match rec {
+                CaptureRecord::Receiver(decl) => {
+                    ids.push(decl.id.clone());
+                    core.add_receiver(decl);
+                }
+                CaptureRecord::Frame(f) => {
+                    first = first.min(f.arrival);
+                    last = last.max(f.arrival);
+                    core.on_frame(f.rx, f.arrival, &f.frame, &mut events);
                 }
             }
         }
+        flush(&mut events, &ids, &mut out)?;
     }
+    let (skipped, errors) = parser.join().map_err(|_| anyhow::anyhow!("capture reader panicked"))??;
     core.finish(&mut events);
     flush(&mut events, &ids, &mut out)?;
     out.flush().context("writing output")?;
     eprintln!("{}", core.mlat().report(last, &|k| ids[k].clone()));
-    for e in &reader.errors {
+    for e in &errors {
         eprintln!("fuse1090: skipped {e}");
     }
-    if reader.skipped > reader.errors.len() as u64 {
-        eprintln!("fuse1090: ... {} malformed lines skipped in all", reader.skipped);
+    if skipped > errors.len() as u64 {
+        eprintln!("fuse1090: ... {skipped} malformed lines skipped in all");
     }
     let s = core.stats();
     Ok(Summary {
@@ -133,7 +157,7 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
         fixes: s.fixes,
         tracks: 0,
         positions: s.positions,
-        skipped_lines: reader.skipped,
+        skipped_lines: skipped,
         span_s: if last >= first { last - first } else { 0.0 },
         elapsed_s: started.elapsed().as_secs_f64(),
     })
