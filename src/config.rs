@@ -36,6 +36,20 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_example_documents_every_field_at_its_default() {
+        let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/config/fuse1090.toml")).unwrap();
+        let example = Config::parse(&text, "config/fuse1090.toml").unwrap();
+        let defaults = Config::default();
+        // Same values: the example shows the defaults.
+        assert_eq!(format!("{example:?}"), format!("{defaults:?}"));
+        // Every field: an example missing one would still parse (defaults), so
+        // count the documented keys against the fields serde knows.
+        let keys = text.lines().filter(|l| l.contains(" = ") && !l.trim_start().starts_with('#')).count();
+        let fields = format!("{defaults:?}").matches(": ").count() - 2; // minus the two sections
+        assert_eq!(keys, fields, "config/fuse1090.toml must list every field");
+    }
+
+    #[test]
     fn defaults_unknown_keys_and_bad_values() {
         let c = Config::parse("", "empty").unwrap();
         assert_eq!(c.core.group_wait_s, CoreConfig::default().group_wait_s);
