@@ -17,17 +17,32 @@ pub struct Config {
     pub publish_source_tracks: bool,
 }
 
+/// Reads a TOML file into `T`; errors name the file (and, from the parser,
+/// the line and column). Shared by configurations and scenarios.
+pub fn load_toml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<(T, String)> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let name = path.display().to_string();
+    Ok((parse_toml(&text, &name)?, name))
+}
+
+/// Parses TOML text into `T`, errors prefixed with `name`.
+pub fn parse_toml<T: serde::de::DeserializeOwned>(text: &str, name: &str) -> Result<T> {
+    toml::from_str(text).map_err(|e| anyhow::anyhow!("{name}: {e}"))
+}
+
 impl Config {
     pub fn load(path: &Path) -> Result<Config> {
-        let text =
-            std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-        Self::parse(&text, &path.display().to_string())
+        let (cfg, name): (Config, String) = load_toml(path)?;
+        cfg.validated(&name)
     }
 
     pub fn parse(text: &str, name: &str) -> Result<Config> {
-        let cfg: Config = toml::from_str(text).map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
-        cfg.core.validate().map_err(|e| anyhow::anyhow!("{name}: [core] {e}"))?;
-        Ok(cfg)
+        parse_toml::<Config>(text, name)?.validated(name)
+    }
+
+    fn validated(self, name: &str) -> Result<Config> {
+        self.core.validate().map_err(|e| anyhow::anyhow!("{name}: [core] {e}"))?;
+        Ok(self)
     }
 }
 
@@ -37,7 +52,8 @@ mod tests {
 
     #[test]
     fn the_example_documents_every_field_at_its_default() {
-        let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/config/fuse1090.toml")).unwrap();
+        let text =
+            std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/config/fuse1090.toml")).unwrap();
         let example = Config::parse(&text, "config/fuse1090.toml").unwrap();
         let defaults = Config::default();
         // Same values: the example shows the defaults.

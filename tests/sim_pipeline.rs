@@ -156,23 +156,35 @@ fn malformed_capture_lines_are_skipped_counted_and_reported() {
     assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("--output"));
 }
 
+/// `run --capture` on a committed capture (with an optional config), then
+/// `eval --json` (with an optional scenario); returns the report.
+fn run_and_eval(name: &str, config: Option<&str>, scenario: Option<&str>) -> serde_json::Value {
+    let dir = root().join("fixtures/captures").join(name);
+    let work = tmp(&format!("eval-{name}"));
+    let out = work.join("o.jsonl");
+    let mut run = fuse1090();
+    run.args(["run", "--capture"]).arg(dir.join("capture.txt")).arg("--output").arg(&out);
+    if let Some(text) = config {
+        std::fs::write(work.join("c.toml"), text).unwrap();
+        run.arg("--config").arg(work.join("c.toml"));
+    }
+    assert!(run.status().unwrap().success());
+    let mut eval = fuse1090();
+    eval.args(["eval", "--json", "--truth"]).arg(dir.join("truth.jsonl")).arg("--tracks").arg(&out);
+    if let Some(s) = scenario {
+        eval.arg("--scenario").arg(root().join(format!("fixtures/scenarios/{s}.toml")));
+    }
+    let res = eval.output().unwrap();
+    assert!(res.status.success(), "{}", String::from_utf8_lossy(&res.stderr));
+    serde_json::from_slice(&res.stdout).unwrap()
+}
+
 #[test]
 fn eval_reports_rows_for_a_simulated_run() {
-    let dir = root().join("fixtures/captures/fusion-8seg");
-    let out = tmp("evalcli").join("o.jsonl");
-    let st =
-        fuse1090().args(["run", "--capture"]).arg(dir.join("capture.txt")).arg("--output").arg(&out).status();
-    assert!(st.unwrap().success());
-    let res = fuse1090()
-        .args(["eval", "--json", "--truth"])
-        .arg(dir.join("truth.jsonl"))
-        .arg("--tracks")
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(res.status.success());
-    let v: serde_json::Value = serde_json::from_slice(&res.stdout).unwrap();
+    let v = run_and_eval("fusion-8seg", None, None);
     assert_eq!(v["overall"][0]["source"], "adsb-report");
+    let dir = root().join("fixtures/captures/fusion-8seg");
+    let out = tmp("eval-fusion-8seg").join("o.jsonl");
     let table = fuse1090()
         .args(["eval", "--truth"])
         .arg(dir.join("truth.jsonl"))
@@ -188,30 +200,11 @@ fn eval_reports_rows_for_a_simulated_run() {
 fn eval_compares_mlat_fixes_with_their_cramer_rao_bound() {
     // The 1 Hz benchmark, every transmission multilaterated: GPS-timed
     // receivers, so the fixes should sit at the bound of their geometry.
-    let dir = root().join("fixtures/captures/fusion-8seg-1hz");
-    let tmpd = tmp("evalcrb");
-    std::fs::write(tmpd.join("all.toml"), "[core.mlat]\nadsb_interval_s = 0.0\n").unwrap();
-    let out = tmpd.join("o.jsonl");
-    let st = fuse1090()
-        .args(["run", "--config"])
-        .arg(tmpd.join("all.toml"))
-        .arg("--capture")
-        .arg(dir.join("capture.txt"))
-        .arg("--output")
-        .arg(&out)
-        .status();
-    assert!(st.unwrap().success());
-    let res = fuse1090()
-        .args(["eval", "--json", "--truth"])
-        .arg(dir.join("truth.jsonl"))
-        .arg("--tracks")
-        .arg(&out)
-        .arg("--scenario")
-        .arg(root().join("fixtures/scenarios/fusion-8seg-1hz.toml"))
-        .output()
-        .unwrap();
-    assert!(res.status.success(), "{}", String::from_utf8_lossy(&res.stderr));
-    let v: serde_json::Value = serde_json::from_slice(&res.stdout).unwrap();
+    let v = run_and_eval(
+        "fusion-8seg-1hz",
+        Some("[core.mlat]\nadsb_interval_s = 0.0\n"),
+        Some("fusion-8seg-1hz"),
+    );
     let mlat = v["overall"].as_array().unwrap().iter().find(|r| r["source"] == "mlat-fix").expect("mlat row");
     let (rmse, crb, ratio) = (
         mlat["h_rmse_m"].as_f64().unwrap(),

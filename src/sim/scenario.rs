@@ -7,7 +7,7 @@
 
 use std::path::Path;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use serde::{Deserialize, Deserializer};
 
 use crate::feed::capture::ClockKind;
@@ -302,13 +302,13 @@ pub struct Traffic {
 
 impl Scenario {
     pub fn load(path: &Path) -> Result<Scenario> {
-        let text =
-            std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-        Self::parse(&text, &path.display().to_string())
+        let (s, name): (Scenario, String) = crate::config::load_toml(path)?;
+        s.validate().map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+        Ok(s)
     }
 
     pub fn parse(text: &str, name: &str) -> Result<Scenario> {
-        let s: Scenario = toml::from_str(text).map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+        let s: Scenario = crate::config::parse_toml(text, name)?;
         s.validate().map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
         Ok(s)
     }
