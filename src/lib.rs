@@ -16,3 +16,4 @@ pub mod mlat;
 pub mod modes;
 pub mod publish;
 pub mod sim;
+pub mod track;

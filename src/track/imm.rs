@@ -1,0 +1,130 @@
+//! Interacting Multiple Model filter: several motion models run in
+//! parallel, mixed before each step through a Markov transition matrix and
+//! weighted after it by how likely each made the measurement.
+
+use nalgebra::{DMatrix, Matrix6, Vector6};
+
+use super::kf::{Gaussian, PosMeasurement};
+use super::models::MotionModel;
+
+#[derive(Clone, Debug)]
+pub struct Imm {
+    pub models: Vec<MotionModel>,
+    /// Row i: probabilities of switching from model i to each model.
+    pub transition: DMatrix<f64>,
+    pub filters: Vec<Gaussian>,
+    pub mu: Vec<f64>,
+}
+
+/// What one IMM step produced.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Step {
+    /// Combined estimate after the update.
+    pub estimate: Gaussian,
+    /// Normalised innovation squared of the combined prediction.
+    pub nis: f64,
+}
+
+impl Imm {
+    /// Starts every model from `init`, with equal probabilities.
+    pub fn new(models: Vec<MotionModel>, transition: DMatrix<f64>, init: Gaussian) -> Imm {
+        let n = models.len();
+        assert_eq!((transition.nrows(), transition.ncols()), (n, n), "transition matrix shape");
+        Imm { filters: vec![init; n], mu: vec![1.0 / n as f64; n], models, transition }
+    }
+
+    /// A transition matrix that stays with probability `stay` and moves to
+    /// each other model with equal share of the rest.
+    pub fn sticky(n: usize, stay: f64) -> DMatrix<f64> {
+        DMatrix::from_fn(n, n, |r, c| if r == c { stay } else { (1.0 - stay) / (n - 1).max(1) as f64 })
+    }
+
+    pub fn estimate(&self) -> Gaussian {
+        combine(&self.filters, &self.mu)
+    }
+
+    /// Predicts over `dt` and updates with `m`. `None` (and no change) when a
+    /// model's update is numerically impossible: the caller resets the track.
+    pub fn step(&mut self, dt: f64, m: &PosMeasurement) -> Option<Step> {
+        let n = self.models.len();
+        // Mixing.
+        let c: Vec<f64> =
+            (0..n).map(|j| (0..n).map(|i| self.transition[(i, j)] * self.mu[i]).sum()).collect();
+        let mut mixed = Vec::with_capacity(n);
+        for j in 0..n {
+            let w: Vec<f64> =
+                (0..n).map(|i| self.transition[(i, j)] * self.mu[i] / c[j].max(1e-300)).collect();
+            mixed.push(combine(&self.filters, &w));
+        }
+        // Model-matched prediction and update.
+        let mut post = Vec::with_capacity(n);
+        let mut lik = Vec::with_capacity(n);
+        let mut predicted = Vec::with_capacity(n);
+        for (j, model) in self.models.iter().enumerate() {
+            let (f, q) = model.transition(dt);
+            let pred = mixed[j].predict(&f, &q);
+            let u = pred.update(m)?;
+            predicted.push(pred);
+            post.push(u.post);
+            lik.push(u.likelihood);
+        }
+        let total: f64 = (0..n).map(|j| lik[j] * c[j]).sum();
+        if !(total > 0.0 && total.is_finite()) {
+            return None;
+        }
+        let mu: Vec<f64> = (0..n).map(|j| lik[j] * c[j] / total).collect();
+        // NIS of the combined prediction (the track's own consistency check).
+        let pred = combine(&predicted, &c);
+        let nis = pred.update(m).map_or(f64::INFINITY, |u| u.nis);
+        self.filters = post;
+        self.mu = mu;
+        let estimate = self.estimate();
+        estimate.healthy().then_some(Step { estimate, nis })
+    }
+}
+
+/// Gaussian mixture moment-matched to one Gaussian.
+fn combine(parts: &[Gaussian], w: &[f64]) -> Gaussian {
+    let mut x = Vector6::zeros();
+    for (g, &wi) in parts.iter().zip(w) {
+        x += g.x * wi;
+    }
+    let mut p = Matrix6::zeros();
+    for (g, &wi) in parts.iter().zip(w) {
+        let d = g.x - x;
+        p += (g.p + d * d.transpose()) * wi;
+    }
+    Gaussian { x, p }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Matrix2, Vector2};
+
+    #[test]
+    fn probabilities_follow_the_model_that_explains_the_data() {
+        // A target turning right at 3 deg/s: the right-turn model wins.
+        let omega = 3f64.to_radians();
+        let models = vec![
+            MotionModel::ConstantVelocity { q: 0.5 },
+            MotionModel::CoordinatedTurn { omega, q: 0.5 },
+            MotionModel::CoordinatedTurn { omega: -omega, q: 0.5 },
+        ];
+        let init = Gaussian {
+            x: Vector6::new(0.0, 0.0, 0.0, 100.0, 0.0, 0.0),
+            p: Matrix6::from_diagonal(&Vector6::new(100.0, 100.0, 25.0, 25.0, 1.0, 1.0)),
+        };
+        let mut imm = Imm::new(models, Imm::sticky(3, 0.95), init);
+        let (f, _) = MotionModel::CoordinatedTurn { omega, q: 0.0 }.transition(1.0);
+        let mut truth = init.x;
+        for _ in 0..20 {
+            truth = f * truth;
+            let m = PosMeasurement { z: Vector2::new(truth[0], truth[1]), r: Matrix2::identity() * 25.0 };
+            imm.step(1.0, &m).unwrap();
+        }
+        assert!(imm.mu[1] > 0.8, "{:?}", imm.mu);
+        let e = imm.estimate();
+        assert!((e.x[0] - truth[0]).abs() < 5.0 && (e.x[1] - truth[1]).abs() < 5.0);
+    }
+}

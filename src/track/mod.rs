@@ -1,0 +1,16 @@
+//! Tracking stage: per-aircraft state estimation.
+//!
+//! Shaped like Stone Soup: motion models ([`models`]) say how a state moves
+//! and how uncertain that is; the predictor and updater ([`kf`]) apply them
+//! and a measurement; the IMM ([`imm`]) runs several models side by side and
+//! mixes them by how well each explains the data. All in a local east/north
+//! plane with fixed-size nalgebra matrices: the horizontal state is
+//! `[e, n, ve, vn, ae, an]` for every model, so the IMM can mix them.
+
+pub mod imm;
+pub mod kf;
+pub mod models;
+
+pub use imm::Imm;
+pub use kf::{Gaussian, PosMeasurement};
+pub use models::MotionModel;
