@@ -50,12 +50,15 @@ impl Imm {
         // Mixing.
         let c: Vec<f64> =
             (0..n).map(|j| (0..n).map(|i| self.transition[(i, j)] * self.mu[i]).sum()).collect();
-        let mut mixed = Vec::with_capacity(n);
-        for j in 0..n {
-            let w: Vec<f64> =
-                (0..n).map(|i| self.transition[(i, j)] * self.mu[i] / c[j].max(1e-300)).collect();
-            mixed.push(combine(&self.filters, &w));
-        }
+        let mixed: Vec<Gaussian> = c
+            .iter()
+            .enumerate()
+            .map(|(j, cj)| {
+                let w: Vec<f64> =
+                    (0..n).map(|i| self.transition[(i, j)] * self.mu[i] / cj.max(1e-300)).collect();
+                combine(&self.filters, &w)
+            })
+            .collect();
         // Model-matched prediction and update.
         let mut post = Vec::with_capacity(n);
         let mut lik = Vec::with_capacity(n);
