@@ -1,0 +1,50 @@
+//! Tracking costs: one IMM step (3 models: CV and a left/right coordinated
+//! turn; and 4 with constant acceleration) with a position update.
+//!
+//! Run: `cargo bench --bench track`.
+
+use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
+use fuse1090::track::{Gaussian, Imm, MotionModel, PosMeasurement};
+use nalgebra::{Matrix2, Matrix6, Vector2, Vector6};
+
+fn imm(n: usize) -> Imm {
+    let w = 3f64.to_radians();
+    let mut models = vec![
+        MotionModel::ConstantVelocity { q: 0.05 },
+        MotionModel::CoordinatedTurn { omega: w, q: 0.05 },
+        MotionModel::CoordinatedTurn { omega: -w, q: 0.05 },
+        MotionModel::ConstantAcceleration { q: 0.5 },
+    ];
+    models.truncate(n);
+    let init = Gaussian {
+        x: Vector6::new(0.0, 0.0, 100.0, 50.0, 0.0, 0.0),
+        p: Matrix6::from_diagonal(&Vector6::new(500.0, 500.0, 100.0, 100.0, 9.0, 9.0)),
+    };
+    Imm::new(models, Imm::sticky(n, 0.9), init)
+}
+
+fn bench(c: &mut Criterion) {
+    let r = Matrix2::identity() * 500.0;
+    let mut g = c.benchmark_group("imm");
+    g.throughput(Throughput::Elements(1000));
+    for n in [3usize, 4] {
+        g.bench_function(format!("update_{n}_models"), |b| {
+            b.iter_batched(
+                || imm(n),
+                |mut f| {
+                    for k in 1..=1000 {
+                        let t = k as f64 * 0.5;
+                        let z = Vector2::new(100.0 * t, 50.0 * t);
+                        black_box(f.step(0.5, &PosMeasurement { z, r }));
+                    }
+                    f
+                },
+                criterion::BatchSize::SmallInput,
+            )
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
