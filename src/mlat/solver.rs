@@ -301,8 +301,9 @@ pub fn solve(
     }
     let Some(cov4) = scaled_inverse(&nrm.a) else { return Err(Reject::Singular) };
     // Scale by the residual when it says the sigmas were optimistic (beyond
-    // what chance explains), so an honest fix keeps an unbiased covariance.
-    let scale = if dof > 0 && nrm.chi2 > chi2_q90 { nrm.chi2 / dof as f64 } else { 1.0 };
+    // what chance explains at 1%), so an honest fix keeps an unbiased
+    // covariance while optimistic sigmas, which exceed it routinely, do not.
+    let scale = if dof > 0 && nrm.chi2 > chi2_quantile(dof, 0.99) { nrm.chi2 / dof as f64 } else { 1.0 };
     let cov3: Matrix3<f64> = cov4.fixed_view::<3, 3>(0, 0).into_owned() * scale;
     let mean_sigma_m = {
         let s: f64 = ms.iter().map(|m| 1.0 / (C_AIR * m.sigma_t).powi(2)).sum::<f64>() / ms.len() as f64;

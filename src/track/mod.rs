@@ -10,6 +10,7 @@
 pub mod imm;
 pub mod kf;
 pub mod models;
+pub mod motion;
 
 pub use imm::Imm;
 pub use kf::{Gaussian, PosMeasurement};
