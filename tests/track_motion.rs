@@ -45,7 +45,7 @@ impl Local {
         let e = self.o + self.r.transpose() * Vector3::from(p);
         [e[0], e[1], e[2]]
     }
-    fn from_ecef(&self, e: [f64; 3]) -> Vector3<f64> {
+    fn local_of(&self, e: [f64; 3]) -> Vector3<f64> {
         self.r * (Vector3::from(e) - self.o)
     }
 }
@@ -70,7 +70,7 @@ fn fix(local: &Local, p: [f64; 3], rng: &mut ChaCha8Rng, noise: &Normal<f64>) ->
     // remove is part of the statistic under test).
     let lim = SolverLimits { chi2_quantile: 1.0, ..SolverLimits::default() };
     let f = solve(&ms, Some(alt), Some(local.to_ecef(TARGET)), &lim).expect("fix");
-    let pos = local.from_ecef(f.ecef);
+    let pos = local.local_of(f.ecef);
     // Local x/y are the origin's east/north; the fix's own east/north frame is
     // half a kilometre away, the same to far better than the test needs.
     Fix2 {

@@ -257,7 +257,6 @@ pub fn solve(
     } else {
         f64::INFINITY
     };
-    let chi2_q90 = if dof > 0 { chi2_quantile(dof, 0.9) } else { f64::INFINITY };
     let mut best: Option<(Vector4<f64>, Normal, usize)> = None;
     let mut saw_failure = false;
     for start in starts.into_iter().flatten() {
