@@ -60,3 +60,55 @@ proptest! {
         }
     }
 }
+
+mod capture_and_mlat {
+    use fuse1090::core::{Core, CoreConfig, Event};
+    use fuse1090::feed::capture::{CaptureReader, CaptureRecord};
+    use proptest::prelude::*;
+
+    fn line() -> impl Strategy<Value = String> {
+        prop_oneof![
+            // Receiver lines, good and bad.
+            (-100.0f64..100.0, -200.0f64..200.0, -1e4f64..1e4, 0..4u8).prop_map(|(a, b, c, k)| format!(
+                "receiver r{k} lat={a} lon={b} alt={c} clock={}",
+                if k % 2 == 0 { "gps" } else { "beast12" }
+            )),
+            // Frame lines with random timestamps and bytes.
+            (1.7e9f64..1.7e9 + 100.0, 0..5u8, any::<u64>(), prop::collection::vec(any::<u8>(), 7..=7))
+                .prop_map(|(t, r, ts, b)| {
+                    let hex: String = b.iter().map(|x| format!("{x:02X}")).collect();
+                    format!("{t:.6} r{r} <{:012X}80{hex};", ts & 0xFFFF_FFFF_FFFF)
+                }),
+            // A valid DF4 from a fixed aircraft, heard with random timestamps.
+            (1.7e9f64..1.7e9 + 100.0, 0..4u8, any::<u64>()).prop_map(|(t, r, ts)| format!(
+                "{t:.6} r{r} <{:012X}8020001838CA3804;",
+                ts & 0xFFFF_FFFF_FFFF
+            )),
+            ".{0,40}",
+        ]
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(300))]
+
+        #[test]
+        fn random_captures_never_panic_and_make_no_fix_from_noise(lines in prop::collection::vec(line(), 0..200)) {
+            let text = lines.join("\n");
+            let mut reader = CaptureReader::new(text.as_bytes(), "random");
+            let mut core = Core::new(&CoreConfig::default());
+            let mut events = Vec::new();
+            while let Some(rec) = reader.next_record().unwrap() {
+                match rec {
+                    CaptureRecord::Receiver(d) => {
+                        core.add_receiver(d);
+                    }
+                    CaptureRecord::Frame(f) => core.on_frame(f.rx, f.arrival, &f.frame, &mut events),
+                }
+            }
+            core.finish(&mut events);
+            // Random timestamps are never geometrically consistent: no fix.
+            let fixes = events.iter().filter(|e| matches!(e, Event::Mlat(_))).count();
+            prop_assert_eq!(fixes, 0);
+        }
+    }
+}
