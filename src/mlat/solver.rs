@@ -342,19 +342,24 @@ pub fn solve(
     })
 }
 
-/// Solves `a x = g` after Jacobi scaling: pseudorange weights (1e6 and more)
-/// and an altitude weight (1e-4) in one matrix defeat a plain Cholesky.
-fn scaled_solve(a: &Matrix4<f64>, g: &Vector4<f64>) -> Option<Vector4<f64>> {
+/// Jacobi scaling of a symmetric positive matrix: `d = diag(a)^-1/2` and
+/// `d a d`, whose unit diagonal Cholesky handles even when pseudorange
+/// weights (1e6 and more) and an altitude weight (1e-4) share one matrix.
+fn jacobi(a: &Matrix4<f64>) -> (Vector4<f64>, Matrix4<f64>) {
     let d = Vector4::from_fn(|i, _| 1.0 / a[(i, i)].max(1e-300).sqrt());
-    let s = Matrix4::from_fn(|r, c| a[(r, c)] * d[r] * d[c]);
+    (d, Matrix4::from_fn(|r, c| a[(r, c)] * d[r] * d[c]))
+}
+
+/// Solves `a x = g` through the Jacobi-scaled matrix.
+fn scaled_solve(a: &Matrix4<f64>, g: &Vector4<f64>) -> Option<Vector4<f64>> {
+    let (d, s) = jacobi(a);
     let y = s.cholesky()?.solve(&g.component_mul(&d));
     Some(y.component_mul(&d))
 }
 
-/// Inverse of a symmetric positive definite matrix, Jacobi-scaled like [`scaled_solve`].
+/// Inverse of a symmetric positive definite matrix, through the scaled one.
 fn scaled_inverse(a: &Matrix4<f64>) -> Option<Matrix4<f64>> {
-    let d = Vector4::from_fn(|i, _| 1.0 / a[(i, i)].max(1e-300).sqrt());
-    let s = Matrix4::from_fn(|r, c| a[(r, c)] * d[r] * d[c]);
+    let (d, s) = jacobi(a);
     let inv = s.cholesky()?.inverse();
     Some(Matrix4::from_fn(|r, c| inv[(r, c)] * d[r] * d[c]))
 }
