@@ -11,6 +11,20 @@ pub const EARTH_MEAN_RADIUS_M: f64 = 6_371_008.8;
 pub const KT_TO_MS: f64 = 1852.0 / 3600.0;
 pub const FT_TO_M: f64 = 0.3048;
 
+/// Meridian and prime-vertical radii of curvature (m) at a latitude (rad).
+pub fn radii(lat_rad: f64) -> (f64, f64) {
+    let w = (1.0 - WGS84_E2 * lat_rad.sin().powi(2)).sqrt();
+    (WGS84_A * (1.0 - WGS84_E2) / (w * w * w), WGS84_A / w)
+}
+
+/// A point moved by a small east/north/up offset (m): the local radii at the
+/// start, accurate to millimetres over kilometres.
+pub fn displace(lat: f64, lon: f64, h: f64, enu: [f64; 3]) -> (f64, f64, f64) {
+    let p = lat.to_radians();
+    let (m, n) = radii(p);
+    (lat + (enu[1] / (m + h)).to_degrees(), lon + (enu[0] / ((n + h) * p.cos())).to_degrees(), h + enu[2])
+}
+
 /// Great-circle distance (m) on the mean sphere.
 pub fn distance_m(lat1: f64, lon1: f64, lat2: f64, lon2: f64) -> f64 {
     let (p1, p2) = (lat1.to_radians(), lat2.to_radians());

@@ -15,8 +15,6 @@ use serde::Serialize;
 use serde_json::Value;
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 
-use crate::geo::{WGS84_A, WGS84_E2};
-
 /// A gap in a track is a break when it exceeds this (s) and three times the
 /// track's usual update interval (parked aircraft squitter every 5 s).
 pub const GAP_S: f64 = 5.0;
@@ -103,9 +101,7 @@ impl Truth {
 /// East/north offset (m) of (lat, lon) from a point.
 fn en_offset(from: &TruthPoint, lat: f64, lon: f64) -> [f64; 2] {
     let p = from.lat.to_radians();
-    let w = (1.0 - WGS84_E2 * p.sin().powi(2)).sqrt();
-    let n = WGS84_A / w;
-    let m = WGS84_A * (1.0 - WGS84_E2) / (w * w * w);
+    let (m, n) = crate::geo::radii(p);
     let dlon = ((lon - from.lon + 540.0).rem_euclid(360.0)) - 180.0;
     [dlon.to_radians() * (n + from.alt) * p.cos(), (lat - from.lat).to_radians() * (m + from.alt)]
 }

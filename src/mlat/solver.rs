@@ -309,13 +309,7 @@ pub fn solve(
         1.0 / s.sqrt()
     };
     let gdop = (cov4.fixed_view::<3, 3>(0, 0).trace()).sqrt() / mean_sigma_m;
-    // East/north basis at the fix.
-    let e = Vector3::new(-sl, cl, 0.0);
-    let nn = Vector3::new(-sp * cl, -sp * sl, cp);
-    let cen = [
-        [(e.transpose() * cov3 * e)[0], (e.transpose() * cov3 * nn)[0]],
-        [(nn.transpose() * cov3 * e)[0], (nn.transpose() * cov3 * nn)[0]],
-    ];
+    let cen = cov_en_of(&cov3, [sp, cp, sl, cl]);
     // Geometry limit on the horizontal part (height is usually constrained).
     let hdop = ((cen[0][0] + cen[1][1]) / scale).sqrt() / mean_sigma_m;
     if !hdop.is_finite() || hdop > limits.max_gdop {
@@ -391,12 +385,18 @@ pub fn crb_en(
     let c = scaled_inverse(&a)?.fixed_view::<3, 3>(0, 0).into_owned();
     let (sp, cp) = lat.to_radians().sin_cos();
     let (sl, cl) = lon.to_radians().sin_cos();
+    Some(cov_en_of(&c, [sp, cp, sl, cl]))
+}
+
+/// An ECEF position covariance seen in the local east/north plane, given the
+/// sines and cosines of latitude and longitude there.
+fn cov_en_of(c: &Matrix3<f64>, [sp, cp, sl, cl]: [f64; 4]) -> [[f64; 2]; 2] {
     let e = Vector3::new(-sl, cl, 0.0);
-    let nn = Vector3::new(-sp * cl, -sp * sl, cp);
-    Some([
-        [(e.transpose() * c * e)[0], (e.transpose() * c * nn)[0]],
-        [(nn.transpose() * c * e)[0], (nn.transpose() * c * nn)[0]],
-    ])
+    let n = Vector3::new(-sp * cl, -sp * sl, cp);
+    [
+        [(e.transpose() * c * e)[0], (e.transpose() * c * n)[0]],
+        [(n.transpose() * c * e)[0], (n.transpose() * c * n)[0]],
+    ]
 }
 
 /// Per-measurement residuals (s, measured minus modelled) and leverages at a

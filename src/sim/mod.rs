@@ -24,7 +24,7 @@ use rand_distr::{Distribution, Normal};
 
 use crate::feed::capture::{CaptureWriter, ReceiverDecl};
 use crate::feed::RawFrame;
-use crate::geo::{geodetic_to_ecef, WGS84_A, WGS84_E2};
+use crate::geo::{displace, geodetic_to_ecef};
 use clock::ClockModel;
 use scenario::{Aircraft, Receiver, Scenario, Segment, StartState};
 use trajectory::{Trajectory, STEP_S};
@@ -57,15 +57,6 @@ struct RxSim {
     bursts: Vec<(f64, f64)>,
     last_arrival: f64,
     rng: ChaCha8Rng,
-}
-
-/// ENU offset (m) from a geodetic point, as a new geodetic point.
-fn displace(lat: f64, lon: f64, h: f64, enu: [f64; 3]) -> (f64, f64, f64) {
-    let p = lat.to_radians();
-    let w = (1.0 - WGS84_E2 * p.sin().powi(2)).sqrt();
-    let n = WGS84_A / w;
-    let m = WGS84_A * (1.0 - WGS84_E2) / (w * w * w);
-    (lat + (enu[1] / (m + h)).to_degrees(), lon + (enu[0] / ((n + h) * p.cos())).to_degrees(), h + enu[2])
 }
 
 /// A uniformly random point in a disk (km) around a centre.

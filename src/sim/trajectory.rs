@@ -4,7 +4,7 @@
 //! flights are accurate anywhere on Earth except within metres of a pole.
 
 use super::scenario::{Segment, StartState};
-use crate::geo::{WGS84_A, WGS84_E2};
+use crate::geo::radii;
 
 pub const STEP_S: f64 = 0.1;
 
@@ -23,14 +23,6 @@ pub struct Sample {
 pub struct Trajectory {
     pub t0: f64,
     pub samples: Vec<Sample>,
-}
-
-fn radii(lat_rad: f64) -> (f64, f64) {
-    let s2 = lat_rad.sin().powi(2);
-    let w = (1.0 - WGS84_E2 * s2).sqrt();
-    let n = WGS84_A / w;
-    let m = WGS84_A * (1.0 - WGS84_E2) / (w * w * w);
-    (m, n)
 }
 
 impl Trajectory {

@@ -12,7 +12,7 @@ use rand_distr::StandardNormal;
 
 use super::scenario::Aircraft;
 use super::trajectory::{Sample, Trajectory};
-use crate::geo::{FT_TO_M, WGS84_A, WGS84_E2};
+use crate::geo::{displace, FT_TO_M};
 use crate::modes::cpr::encode as cpr_encode;
 use crate::modes::encode::{
     ac13_q, df11, df17, id13, me_airborne_position, me_identification, me_operational_status,
@@ -72,14 +72,6 @@ fn nacv_sigma(nac_v: u8) -> f64 {
         _ => 0.3,
     };
     bound / 2.448
-}
-
-fn offset(lat: f64, lon: f64, h: f64, east: f64, north: f64) -> (f64, f64) {
-    let p = lat.to_radians();
-    let w = (1.0 - WGS84_E2 * p.sin().powi(2)).sqrt();
-    let n = WGS84_A / w;
-    let m = WGS84_A * (1.0 - WGS84_E2) / (w * w * w);
-    (lat + (north / (m + h)).to_degrees(), lon + (east / ((n + h) * p.cos())).to_degrees())
 }
 
 impl Transmitter {
@@ -170,7 +162,8 @@ impl Transmitter {
                 let odd = self.next_odd;
                 self.next_odd = !odd;
                 let [de, dn] = self.spec.spoof_offset_m.unwrap_or([0.0, 0.0]);
-                let (lat, lon) = offset(s.lat, s.lon, s.alt_m, de + self.gnss[0], dn + self.gnss[1]);
+                let (lat, lon, _) =
+                    displace(s.lat, s.lon, s.alt_m, [de + self.gnss[0], dn + self.gnss[1], 0.0]);
                 if self.spec.on_ground {
                     let gs = s.vel[0].hypot(s.vel[1]) * MS_TO_KT;
                     let track = (gs > 1.0).then(|| s.vel[0].atan2(s.vel[1]).to_degrees());
