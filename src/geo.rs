@@ -25,6 +25,12 @@ pub fn displace(lat: f64, lon: f64, h: f64, enu: [f64; 3]) -> (f64, f64, f64) {
     (lat + (enu[1] / (m + h)).to_degrees(), lon + (enu[0] / ((n + h) * p.cos())).to_degrees(), h + enu[2])
 }
 
+/// Straight-line distance between two ECEF points (m).
+#[inline]
+pub fn ecef_distance(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
 /// Great-circle distance (m) on the mean sphere.
 pub fn distance_m(lat1: f64, lon1: f64, lat2: f64, lon2: f64) -> f64 {
     let (p1, p2) = (lat1.to_radians(), lat2.to_radians());

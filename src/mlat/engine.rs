@@ -17,7 +17,7 @@ use super::group::Group;
 use super::solver::{solve, AltitudeConstraint, Measurement, Reject, SolverLimits, C_AIR};
 use super::sync::{ClockSync, LocalCopy};
 use crate::feed::capture::{ClockKind, ReceiverDecl};
-use crate::geo::{geodetic_to_ecef, FT_TO_M};
+use crate::geo::{ecef_distance, geodetic_to_ecef, FT_TO_M};
 
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -183,7 +183,7 @@ struct AcState {
     /// Recent mean normalised innovation of the sync measurements its ADS-B
     /// positions made: an aircraft whose positions disagree with the timing
     /// (bad GPS, spoofing) stops being a sync source.
-    sync_outlier_rate: f64,
+    sync_nis: f64,
     sync_uses: u32,
     sync_banned: bool,
 }
@@ -399,7 +399,7 @@ impl Mlat {
             let rx = &self.rxs[c.rx];
             let m =
                 Measurement { pos: rx.ecef, t: *t - rx.bias(), sigma_t: (rx.sigma().powi(2) + var).sqrt() };
-            match ms.iter().position(|o| dist(o.pos, m.pos) < self.cfg.min_separation_m) {
+            match ms.iter().position(|o| ecef_distance(o.pos, m.pos) < self.cfg.min_separation_m) {
                 Some(k) => {
                     self.stats.close_receivers += 1;
                     let (w1, w2) = (1.0 / ms[k].sigma_t.powi(2), 1.0 / m.sigma_t.powi(2));
@@ -452,7 +452,7 @@ impl Mlat {
             (ClockKind::Gps, Some(epoch)) => epoch as f64 * 1e-9 + fix.t_emit,
             _ => {
                 let first = arrivals.iter().cloned().fold(f64::INFINITY, f64::min);
-                let nearest = ms.iter().map(|m| dist(m.pos, fix.ecef)).fold(f64::INFINITY, f64::min);
+                let nearest = ms.iter().map(|m| ecef_distance(m.pos, fix.ecef)).fold(f64::INFINITY, f64::min);
                 first - nearest / C_AIR
             }
         };
@@ -555,8 +555,8 @@ impl Mlat {
         let a = self.aircraft.entry(addr).or_default();
         let mean = nis_sum / judged as f64;
         a.sync_uses += 1;
-        a.sync_outlier_rate += (mean - a.sync_outlier_rate) / (a.sync_uses.min(20) as f64);
-        if !a.sync_banned && a.sync_uses >= 10 && a.sync_outlier_rate > SYNC_SOURCE_MAX_NIS {
+        a.sync_nis += (mean - a.sync_nis) / (a.sync_uses.min(20) as f64);
+        if !a.sync_banned && a.sync_uses >= 10 && a.sync_nis > SYNC_SOURCE_MAX_NIS {
             a.sync_banned = true;
             self.stats.sync_banned_aircraft += 1;
             tracing::warn!(
@@ -568,7 +568,7 @@ impl Mlat {
 
     /// Recent mean normalised innovation of an aircraft's sync measurements.
     pub fn sync_nis(&self, addr: u32) -> Option<f64> {
-        self.aircraft.get(&addr).filter(|a| a.sync_uses > 0).map(|a| a.sync_outlier_rate)
+        self.aircraft.get(&addr).filter(|a| a.sync_uses > 0).map(|a| a.sync_nis)
     }
 
     /// Whether an aircraft's ADS-B positions are refused as sync sources.
@@ -579,7 +579,7 @@ impl Mlat {
     fn sync_from(&mut self, copies: &[LocalCopy], p: [f64; 3], sigma_pos: f64, now: f64) -> (f64, u32) {
         self.stats.sync_messages += 1;
         let n = copies.len();
-        let ranges: Vec<f64> = copies.iter().map(|c| dist(self.rxs[c.rx].ecef, p)).collect();
+        let ranges: Vec<f64> = copies.iter().map(|c| ecef_distance(self.rxs[c.rx].ecef, p)).collect();
         let var: Vec<f64> = copies.iter().map(|c| self.rxs[c.rx].sigma_t.powi(2)).collect();
         // The emitter's position error moves the two ranges differently: by
         // the difference of the unit vectors towards the receivers.
@@ -600,10 +600,6 @@ impl Mlat {
         }
         self.sync.observe(copies, &ranges, &var, &geom, now)
     }
-}
-
-fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
 #[cfg(test)]
@@ -642,7 +638,7 @@ mod tests {
             .map(|(i, r)| {
                 let p = geodetic_to_ecef(r.lat, r.lon, r.alt);
                 // From the second of the day: Unix time in an f64 has 240 ns steps.
-                let toa = t.rem_euclid(86_400.0) + dist(p, target) / C_AIR;
+                let toa = t.rem_euclid(86_400.0) + ecef_distance(p, target) / C_AIR;
                 Copy { rx: i, timestamp: ClockKind::gps_timestamp(toa), arrival: t + 0.1, signal: 100 }
             })
             .collect();

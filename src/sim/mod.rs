@@ -24,7 +24,7 @@ use rand_distr::{Distribution, Normal};
 
 use crate::feed::capture::{CaptureWriter, ReceiverDecl};
 use crate::feed::RawFrame;
-use crate::geo::{displace, geodetic_to_ecef};
+use crate::geo::{displace, ecef_distance, geodetic_to_ecef};
 use clock::ClockModel;
 use scenario::{Aircraft, Receiver, Scenario, Segment, StartState};
 use trajectory::{Trajectory, STEP_S};
@@ -268,10 +268,7 @@ pub fn simulate(s: &Scenario, capture: impl Write, mut truth: impl Write) -> Res
             let p = x.true_pos;
             let pe = geodetic_to_ecef(p.lat, p.lon, p.alt_m);
             for (ri, rx) in rxs.iter_mut().enumerate() {
-                let d = ((pe[0] - rx.ecef[0]).powi(2)
-                    + (pe[1] - rx.ecef[1]).powi(2)
-                    + (pe[2] - rx.ecef[2]).powi(2))
-                .sqrt();
+                let d = ecef_distance(pe, rx.ecef);
                 if d > rx.spec.range_km * 1000.0 || d > radio_horizon_m(p.alt_m, rx.spec.alt_m) {
                     continue;
                 }
