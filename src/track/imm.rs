@@ -2,16 +2,28 @@
 //! parallel, mixed before each step through a Markov transition matrix and
 //! weighted after it by how likely each made the measurement.
 
+//!
+//! The model set is shared (an `Arc`) so a track's state is cheap to copy:
+//! tracks keep copies to re-run late measurements in time order.
+
+use std::sync::Arc;
+
 use nalgebra::{DMatrix, Matrix6, Vector6};
 
-use super::kf::{Gaussian, PosMeasurement};
+use super::kf::{Gaussian, Linear, PosMeasurement};
 use super::models::MotionModel;
 
-#[derive(Clone, Debug)]
-pub struct Imm {
+/// The models and their Markov switching matrix.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImmSpec {
     pub models: Vec<MotionModel>,
     /// Row i: probabilities of switching from model i to each model.
     pub transition: DMatrix<f64>,
+}
+
+#[derive(Clone, Debug)]
+pub struct Imm {
+    pub spec: Arc<ImmSpec>,
     pub filters: Vec<Gaussian>,
     pub mu: Vec<f64>,
 }
@@ -30,44 +42,69 @@ impl Imm {
     pub fn new(models: Vec<MotionModel>, transition: DMatrix<f64>, init: Gaussian) -> Imm {
         let n = models.len();
         assert_eq!((transition.nrows(), transition.ncols()), (n, n), "transition matrix shape");
-        Imm { filters: vec![init; n], mu: vec![1.0 / n as f64; n], models, transition }
+        Imm::with_spec(Arc::new(ImmSpec { models, transition }), init)
+    }
+
+    pub fn with_spec(spec: Arc<ImmSpec>, init: Gaussian) -> Imm {
+        let n = spec.models.len();
+        Imm { filters: vec![init; n], mu: vec![1.0 / n as f64; n], spec }
     }
 
     /// A transition matrix that stays with probability `stay` and moves to
     /// each other model with equal share of the rest.
     pub fn sticky(n: usize, stay: f64) -> DMatrix<f64> {
-        DMatrix::from_fn(n, n, |r, c| if r == c { stay } else { (1.0 - stay) / (n - 1).max(1) as f64 })
+        if n == 1 {
+            return DMatrix::from_element(1, 1, 1.0);
+        }
+        DMatrix::from_fn(n, n, |r, c| if r == c { stay } else { (1.0 - stay) / (n - 1) as f64 })
     }
 
     pub fn estimate(&self) -> Gaussian {
         combine(&self.filters, &self.mu)
     }
 
-    /// Predicts over `dt` and updates with `m`. `None` (and no change) when a
-    /// model's update is numerically impossible: the caller resets the track.
-    pub fn step(&mut self, dt: f64, m: &PosMeasurement) -> Option<Step> {
-        let n = self.models.len();
-        // Mixing.
-        let c: Vec<f64> =
-            (0..n).map(|j| (0..n).map(|i| self.transition[(i, j)] * self.mu[i]).sum()).collect();
-        let mixed: Vec<Gaussian> = c
+    /// Mixing probabilities' normalisers `c` and each model's mixed prediction over `dt`.
+    fn mixed_predictions(&self, dt: f64) -> (Vec<f64>, Vec<Gaussian>) {
+        let (n, tr) = (self.spec.models.len(), &self.spec.transition);
+        let c: Vec<f64> = (0..n).map(|j| (0..n).map(|i| tr[(i, j)] * self.mu[i]).sum()).collect();
+        let predicted = c
             .iter()
+            .zip(&self.spec.models)
             .enumerate()
-            .map(|(j, cj)| {
-                let w: Vec<f64> =
-                    (0..n).map(|i| self.transition[(i, j)] * self.mu[i] / cj.max(1e-300)).collect();
-                combine(&self.filters, &w)
+            .map(|(j, (cj, model))| {
+                let w: Vec<f64> = (0..n).map(|i| tr[(i, j)] * self.mu[i] / cj.max(1e-300)).collect();
+                let mixed = combine(&self.filters, &w);
+                let (f, q) = model.transition_at(dt, &mixed.x);
+                mixed.predict(&f, &q)
             })
             .collect();
-        // Model-matched prediction and update.
+        (c, predicted)
+    }
+
+    /// The combined prediction over `dt`, without changing the filter.
+    pub fn predicted(&self, dt: f64) -> Gaussian {
+        if dt == 0.0 {
+            return self.estimate();
+        }
+        let (c, predicted) = self.mixed_predictions(dt);
+        combine(&predicted, &c)
+    }
+
+    /// Predicts over `dt` and updates with a position `m`.
+    pub fn step(&mut self, dt: f64, m: &PosMeasurement) -> Option<Step> {
+        self.step_linear(dt, &m.linear())
+    }
+
+    /// Predicts over `dt` and updates with `m`. `None` (and no change) when a
+    /// model's update is numerically impossible: the caller resets the track.
+    pub fn step_linear<const M: usize>(&mut self, dt: f64, m: &Linear<M>) -> Option<Step> {
+        let n = self.spec.models.len();
+        let (c, predicted) = self.mixed_predictions(dt);
+        // Model-matched update.
         let mut post = Vec::with_capacity(n);
         let mut lik = Vec::with_capacity(n);
-        let mut predicted = Vec::with_capacity(n);
-        for (j, model) in self.models.iter().enumerate() {
-            let (f, q) = model.transition(dt);
-            let pred = mixed[j].predict(&f, &q);
-            let u = pred.update(m)?;
-            predicted.push(pred);
+        for pred in &predicted {
+            let u = pred.update_linear(m)?;
             post.push(u.post);
             lik.push(u.likelihood);
         }
@@ -78,7 +115,7 @@ impl Imm {
         let mu: Vec<f64> = (0..n).map(|j| lik[j] * c[j] / total).collect();
         // NIS of the combined prediction (the track's own consistency check).
         let pred = combine(&predicted, &c);
-        let nis = pred.update(m).map_or(f64::INFINITY, |u| u.nis);
+        let nis = pred.update_linear(m).map_or(f64::INFINITY, |u| u.nis);
         self.filters = post;
         self.mu = mu;
         let estimate = self.estimate();
@@ -87,7 +124,7 @@ impl Imm {
 }
 
 /// Gaussian mixture moment-matched to one Gaussian.
-fn combine(parts: &[Gaussian], w: &[f64]) -> Gaussian {
+pub fn combine(parts: &[Gaussian], w: &[f64]) -> Gaussian {
     let mut x = Vector6::zeros();
     for (g, &wi) in parts.iter().zip(w) {
         x += g.x * wi;

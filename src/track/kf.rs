@@ -1,15 +1,23 @@
-//! Kalman predictor and updater for the 6-state horizontal model, with a
-//! position measurement. Joseph-form update so the covariance stays
-//! symmetric and positive definite; every step checks it and reports a
-//! filter that went numerically bad instead of publishing it.
+//! Kalman predictor and updater for the 6-state horizontal model, with any
+//! linear measurement (position, velocity). Joseph-form update so the
+//! covariance stays symmetric and positive definite; every step checks it
+//! and reports a filter that went numerically bad instead of publishing it.
 
-use nalgebra::{Matrix2, Matrix2x6, Matrix6, Vector2, Vector6};
+use nalgebra::{Matrix2, Matrix2x6, Matrix6, SMatrix, SVector, Vector2, Vector6};
 
 /// A state estimate: mean `[e, n, ve, vn, ae, an]` (m, m/s, m/s^2) and covariance.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Gaussian {
     pub x: Vector6<f64>,
     pub p: Matrix6<f64>,
+}
+
+/// A linear measurement `z = H x + v`, `v ~ N(0, R)`, of `M` components.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Linear<const M: usize> {
+    pub h: SMatrix<f64, M, 6>,
+    pub z: SVector<f64, M>,
+    pub r: SMatrix<f64, M, M>,
 }
 
 /// A horizontal position measurement (east, north; m) with its covariance.
@@ -19,16 +27,28 @@ pub struct PosMeasurement {
     pub r: Matrix2<f64>,
 }
 
+impl PosMeasurement {
+    pub fn linear(&self) -> Linear<2> {
+        Linear { h: h(), z: self.z, r: self.r }
+    }
+}
+
+/// A horizontal velocity measurement (east, north; m/s).
+pub fn velocity(z: Vector2<f64>, r: Matrix2<f64>) -> Linear<2> {
+    Linear { h: Matrix2x6::new(0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0), z, r }
+}
+
 /// The result of an update: the posterior and the innovation statistics.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Updated {
     pub post: Gaussian,
-    /// Normalised innovation squared (chi-square, 2 dof when consistent).
+    /// Normalised innovation squared (chi-square with M dof when consistent).
     pub nis: f64,
     /// Measurement likelihood N(innovation; 0, S).
     pub likelihood: f64,
 }
 
+/// Position rows of the state.
 pub fn h() -> Matrix2x6<f64> {
     Matrix2x6::new(1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0)
 }
@@ -40,9 +60,16 @@ impl Gaussian {
 
     /// `None` when the innovation covariance is not positive definite.
     pub fn update(&self, m: &PosMeasurement) -> Option<Updated> {
-        let h = h();
-        let nu = m.z - h * self.x;
-        let s = h * self.p * h.transpose() + m.r;
+        self.update_linear(&m.linear())
+    }
+
+    /// Innovation and its covariance `(z - H x, H P H' + R)`.
+    pub fn innovation<const M: usize>(&self, m: &Linear<M>) -> (SVector<f64, M>, SMatrix<f64, M, M>) {
+        (m.z - m.h * self.x, m.h * self.p * m.h.transpose() + m.r)
+    }
+
+    pub fn update_linear<const M: usize>(&self, m: &Linear<M>) -> Option<Updated> {
+        let (nu, s) = self.innovation(m);
         // Positive definite or nothing: a determinant alone passes -S.
         let chol = s.cholesky()?;
         let s_inv = chol.inverse();
@@ -50,11 +77,13 @@ impl Gaussian {
         if !(det > 0.0 && det.is_finite()) {
             return None;
         }
-        let k = self.p * h.transpose() * s_inv;
-        let ikh = Matrix6::identity() - k * h;
+        let k = self.p * m.h.transpose() * s_inv;
+        let ikh = Matrix6::identity() - k * m.h;
         let p = ikh * self.p * ikh.transpose() + k * m.r * k.transpose();
         let nis = (nu.transpose() * s_inv * nu)[0];
-        let likelihood = (-0.5 * nis).exp() / (2.0 * std::f64::consts::PI * det.sqrt());
+        let norm = (2.0 * std::f64::consts::PI).powi(M as i32 / 2)
+            * if M % 2 == 1 { (2.0 * std::f64::consts::PI).sqrt() } else { 1.0 };
+        let likelihood = (-0.5 * nis).exp() / (norm * det.sqrt());
         Some(Updated { post: Gaussian { x: self.x + k * nu, p: (p + p.transpose()) * 0.5 }, nis, likelihood })
     }
 
@@ -64,6 +93,11 @@ impl Gaussian {
             && self.p.iter().all(|v| v.is_finite())
             && self.p.cholesky().is_some()
     }
+}
+
+/// A zero state with a diagonal covariance.
+pub fn diagonal(x: Vector6<f64>, var: [f64; 6]) -> Gaussian {
+    Gaussian { x, p: Matrix6::from_diagonal(&Vector6::from(var)) }
 }
 
 #[cfg(test)]
@@ -79,8 +113,17 @@ mod tests {
         assert!((u.post.x[0] - 5.0).abs() < 1e-12);
         assert!((u.post.p[(0, 0)] - 50.0).abs() < 1e-9);
         assert!((u.nis - 0.5).abs() < 1e-12);
+        assert!((u.likelihood - (-0.25f64).exp() / (2.0 * std::f64::consts::PI * 200.0)).abs() < 1e-12);
         assert!(u.post.healthy());
         let bad = PosMeasurement { z: Vector2::zeros(), r: -Matrix2::identity() * 1e3 };
         assert!(g.update(&bad).is_none());
+    }
+
+    #[test]
+    fn a_velocity_measurement_sets_velocity_and_leaves_position() {
+        let g = diagonal(Vector6::zeros(), [100.0, 100.0, 1e4, 1e4, 1.0, 1.0]);
+        let u = g.update_linear(&velocity(Vector2::new(100.0, -50.0), Matrix2::identity())).unwrap();
+        assert!((u.post.x[2] - 100.0).abs() < 0.02 && (u.post.x[3] + 50.0).abs() < 0.02);
+        assert_eq!((u.post.x[0], u.post.p[(0, 0)]), (0.0, 100.0));
     }
 }

@@ -7,11 +7,17 @@
 //! plane with fixed-size nalgebra matrices: the horizontal state is
 //! `[e, n, ve, vn, ae, an]` for every model, so the IMM can mix them.
 
+pub mod config;
 pub mod imm;
 pub mod kf;
 pub mod models;
 pub mod motion;
+pub mod plane;
+#[allow(clippy::module_inception)]
+pub mod track;
 
-pub use imm::Imm;
-pub use kf::{Gaussian, PosMeasurement};
+pub use config::{ModelConfig, TrackConfig};
+pub use imm::{Imm, ImmSpec};
+pub use kf::{Gaussian, Linear, PosMeasurement};
 pub use models::MotionModel;
+pub use track::{Estimate, Measurement, Observation, Outcome, Source, Stage, Track};

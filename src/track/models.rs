@@ -7,9 +7,16 @@
 //!   IMM turn pair; linear because the rate is fixed); acceleration is the
 //!   centripetal one the turn implies;
 //! - Singer (acceleration a first-order Gauss-Markov process with time
-//!   constant `1/alpha`), its noise integrated numerically.
+//!   constant `1/alpha`), its noise integrated numerically;
+//! - "current statistical" (Zhou's model): Singer's process with a non-zero
+//!   mean equal to the current acceleration estimate, which makes the
+//!   transition the constant-acceleration one, and a noise whose variance
+//!   follows a Rayleigh law, `(4 - pi)/pi (a_max - |a|)^2` per axis: small
+//!   while the estimate sits near the limit, large when the target could
+//!   still start manoeuvring. It is the one model that needs the state, so
+//!   the IMM asks every model through [`MotionModel::transition_at`].
 
-use nalgebra::{Matrix3, Matrix6};
+use nalgebra::{Matrix3, Matrix6, Vector6};
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum MotionModel {
@@ -21,12 +28,19 @@ pub enum MotionModel {
     CoordinatedTurn { omega: f64, q: f64 },
     /// Manoeuvre rate alpha (1/s) and acceleration standard deviation (m/s^2).
     Singer { alpha: f64, sigma_a: f64 },
+    /// Manoeuvre rate alpha (1/s) and largest acceleration (m/s^2).
+    CurrentStatistical { alpha: f64, a_max: f64 },
 }
 
 /// Per-axis (position, velocity, acceleration) blocks into the 6-state layout.
 fn per_axis(f: &Matrix3<f64>) -> Matrix6<f64> {
+    two_axes(f, f)
+}
+
+/// East and north blocks, possibly different, into the 6-state layout.
+fn two_axes(east: &Matrix3<f64>, north: &Matrix3<f64>) -> Matrix6<f64> {
     let mut m = Matrix6::zeros();
-    for axis in 0..2 {
+    for (axis, f) in [east, north].into_iter().enumerate() {
         for r in 0..3 {
             for c in 0..3 {
                 m[(2 * r + axis, 2 * c + axis)] = f[(r, c)];
@@ -36,19 +50,45 @@ fn per_axis(f: &Matrix3<f64>) -> Matrix6<f64> {
     m
 }
 
+fn ca_transition(t: f64) -> Matrix3<f64> {
+    Matrix3::new(1.0, t, t * t / 2.0, 0.0, 1.0, t, 0.0, 0.0, 1.0)
+}
+
+/// Rayleigh-law acceleration variance of the current statistical model; a
+/// tenth of the limit stays as a floor so the model never stops listening.
+pub fn rayleigh_variance(a_max: f64, a: f64) -> f64 {
+    let room = (a_max - a.abs()).max(0.1 * a_max);
+    (4.0 - std::f64::consts::PI) / std::f64::consts::PI * room * room
+}
+
 fn cv_noise(q: f64, t: f64) -> Matrix3<f64> {
     Matrix3::new(t.powi(3) / 3.0, t * t / 2.0, 0.0, t * t / 2.0, t, 0.0, 0.0, 0.0, 1e-6) * q
 }
 
 impl MotionModel {
+    /// Transition and noise over `t` from state `x` (only the current
+    /// statistical model looks at it).
+    pub fn transition_at(&self, t: f64, x: &Vector6<f64>) -> (Matrix6<f64>, Matrix6<f64>) {
+        match *self {
+            MotionModel::CurrentStatistical { alpha, a_max } => {
+                let unit = singer_noise(alpha, 1.0, t);
+                let (qe, qn) = (rayleigh_variance(a_max, x[4]), rayleigh_variance(a_max, x[5]));
+                (per_axis(&ca_transition(t)), two_axes(&(unit * qe), &(unit * qn)))
+            }
+            _ => self.transition(t),
+        }
+    }
+
+    /// Transition and noise over `t`; the current statistical model at zero acceleration.
     pub fn transition(&self, t: f64) -> (Matrix6<f64>, Matrix6<f64>) {
         match *self {
+            MotionModel::CurrentStatistical { .. } => self.transition_at(t, &Vector6::zeros()),
             MotionModel::ConstantVelocity { q } => {
                 let f = Matrix3::new(1.0, t, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0);
                 (per_axis(&f), per_axis(&cv_noise(q, t)))
             }
             MotionModel::ConstantAcceleration { q } => {
-                let f = Matrix3::new(1.0, t, t * t / 2.0, 0.0, 1.0, t, 0.0, 0.0, 1.0);
+                let f = ca_transition(t);
                 let qq = Matrix3::new(
                     t.powi(5) / 20.0,
                     t.powi(4) / 8.0,
@@ -135,7 +175,6 @@ fn singer_noise(alpha: f64, sigma_a: f64, t: f64) -> Matrix3<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::Vector6;
 
     #[test]
     fn constant_velocity_moves_and_drops_acceleration() {
@@ -170,5 +209,19 @@ mod tests {
         let (_, q_long) = MotionModel::Singer { alpha: 1.0, sigma_a: 2.0 }.transition(50.0);
         assert!((q_long[(4, 4)] - 4.0).abs() < 0.01, "{}", q_long[(4, 4)]);
         assert!(q.cholesky().is_some());
+    }
+
+    #[test]
+    fn current_statistical_keeps_the_acceleration_and_narrows_near_the_limit() {
+        let cs = MotionModel::CurrentStatistical { alpha: 0.1, a_max: 10.0 };
+        let x = Vector6::new(0.0, 0.0, 100.0, 0.0, 9.0, 0.0);
+        let (f, q) = cs.transition_at(2.0, &x);
+        let y = f * x;
+        assert!((y[0] - (200.0 + 18.0)).abs() < 1e-9 && (y[4] - 9.0).abs() < 1e-12);
+        // East sits near the limit (little room), north at zero (the most).
+        assert!(q[(4, 4)] < 0.05 * q[(5, 5)], "{} vs {}", q[(4, 4)], q[(5, 5)]);
+        let expect = (4.0 - std::f64::consts::PI) / std::f64::consts::PI * 100.0;
+        let unit = MotionModel::Singer { alpha: 0.1, sigma_a: 1.0 }.transition(2.0).1;
+        assert!((q[(5, 5)] - expect * unit[(5, 5)]).abs() < 1e-9);
     }
 }

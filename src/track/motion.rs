@@ -105,6 +105,7 @@ impl Motion {
 #[derive(Clone, Debug)]
 pub struct MotionTest {
     n: usize,
+    pfa: f64,
     threshold: f64,
     window: std::collections::VecDeque<Fix2>,
 }
@@ -112,7 +113,15 @@ pub struct MotionTest {
 impl MotionTest {
     pub fn new(n: usize, pfa: f64) -> MotionTest {
         assert!(n >= 2, "a window of at least two fixes");
-        MotionTest { n, threshold: threshold(2 * (n - 1), pfa), window: Default::default() }
+        MotionTest { n, pfa, threshold: threshold(2 * (n - 1), pfa), window: Default::default() }
+    }
+
+    pub fn window_len(&self) -> usize {
+        self.n
+    }
+
+    pub fn false_alarm(&self) -> f64 {
+        self.pfa
     }
 
     pub fn push(&mut self, fix: Fix2) -> Motion {

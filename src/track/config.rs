@@ -1,0 +1,256 @@
+//! Tracker configuration (`[track]`): the IMM model set, noise, the
+//! NACp-driven sampling table, lifecycle and bounds. Validated as a whole so
+//! every problem is reported at once.
+
+use std::sync::Arc;
+
+use nalgebra::DMatrix;
+use serde::Deserialize;
+
+use super::imm::ImmSpec;
+use super::models::MotionModel;
+
+/// One model of the IMM set, as written in the configuration.
+#[derive(Clone, Copy, Debug, Deserialize, serde::Serialize, PartialEq)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum ModelConfig {
+    /// Constant velocity; `q` acceleration noise density (m^2/s^3).
+    Cv { q: f64 },
+    /// Constant acceleration; `q` jerk noise density (m^2/s^5).
+    Ca { q: f64 },
+    /// Coordinated turn at `turn_dps` (deg/s, positive right); `q` as for cv.
+    Ct { turn_dps: f64, q: f64 },
+    /// Singer: manoeuvre rate `alpha` (1/s), acceleration sigma (m/s^2).
+    Singer { alpha: f64, sigma_a: f64 },
+    /// Current statistical: manoeuvre rate `alpha` (1/s), largest acceleration (m/s^2).
+    Cs { alpha: f64, a_max: f64 },
+}
+
+impl ModelConfig {
+    pub fn model(&self) -> MotionModel {
+        match *self {
+            ModelConfig::Cv { q } => MotionModel::ConstantVelocity { q },
+            ModelConfig::Ca { q } => MotionModel::ConstantAcceleration { q },
+            ModelConfig::Ct { turn_dps, q } => {
+                MotionModel::CoordinatedTurn { omega: turn_dps.to_radians(), q }
+            }
+            ModelConfig::Singer { alpha, sigma_a } => MotionModel::Singer { alpha, sigma_a },
+            ModelConfig::Cs { alpha, a_max } => MotionModel::CurrentStatistical { alpha, a_max },
+        }
+    }
+
+    fn check(&self) -> Result<(), String> {
+        let positive = |name: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(format!("{name} = {v} must be positive"))
+            }
+        };
+        match *self {
+            ModelConfig::Cv { q } | ModelConfig::Ca { q } => positive("q", q),
+            ModelConfig::Ct { turn_dps, q } => {
+                positive("q", q)?;
+                if turn_dps.is_finite() && turn_dps.abs() <= 20.0 {
+                    Ok(())
+                } else {
+                    Err(format!("turn_dps = {turn_dps} must be within +-20"))
+                }
+            }
+            ModelConfig::Singer { alpha, sigma_a } => {
+                positive("alpha", alpha).and(positive("sigma_a", sigma_a))
+            }
+            ModelConfig::Cs { alpha, a_max } => positive("alpha", alpha).and(positive("a_max", a_max)),
+        }
+    }
+}
+
+#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrackConfig {
+    /// The IMM model set.
+    pub models: Vec<ModelConfig>,
+    /// Probability of staying in a model from one step to the next; the rest
+    /// is shared equally. Ignored when `transition` is given.
+    pub stay: f64,
+    /// Full Markov switching matrix (rows sum to 1), optional.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub transition: Option<Vec<Vec<f64>>>,
+    /// Vertical channel (height, climb rate): acceleration noise density (m^2/s^3).
+    pub vertical_q: f64,
+    /// Output period by NACp 0..=11 (s).
+    pub period_by_nacp: [f64; 12],
+    /// Period of tracks without NACp (MLAT only) (s).
+    pub period_default_s: f64,
+    /// Late measurements up to this age are put in time order (s).
+    pub reorder_window_s: f64,
+    /// Time-of-applicability uncertainty of an ADS-B position (s, 1 sigma):
+    /// GPS-timed receivers, and receivers timed by arrival at the server.
+    pub adsb_time_sigma_gps_s: f64,
+    pub adsb_time_sigma_arrival_s: f64,
+    /// MLAT fixes' covariance is multiplied by up to this much, in
+    /// proportion to the share of their timing variance that came from
+    /// clock synchronisation (which persists from fix to fix).
+    pub mlat_sync_inflation: f64,
+    /// Variational-Bayes scale of each source's measurement noise.
+    pub vb: bool,
+    /// Per-measurement forgetting factor of the VB estimate (0-1).
+    pub vb_forgetting: f64,
+    /// Weight of the prior (nominal noise) in the VB estimate, in measurements.
+    pub vb_prior: f64,
+    /// Position measurements beyond this chi-square probability are gated out.
+    pub gate_probability: f64,
+    /// After this many gated measurements in a row the track restarts on the new data.
+    pub max_gated_in_a_row: u32,
+    /// Confirmation: `confirm_m` accepted positions among the last `confirm_n`.
+    pub confirm_m: u32,
+    pub confirm_n: u32,
+    /// A track without a position update for this long is coasting (s) and
+    /// dropped after `drop_after_s`.
+    pub coast_after_s: f64,
+    pub drop_after_s: f64,
+    /// Largest number of aircraft tracked; more are refused and counted.
+    pub max_tracks: usize,
+    /// Static/moving test: window of positions, their spacing (s; closer
+    /// ones are skipped: slow movers need time to show) and false-alarm rate.
+    pub motion_window: usize,
+    pub motion_interval_s: f64,
+    pub motion_false_alarm: f64,
+}
+
+impl Default for TrackConfig {
+    fn default() -> Self {
+        TrackConfig {
+            models: vec![
+                ModelConfig::Cv { q: 0.05 },
+                ModelConfig::Ct { turn_dps: 3.0, q: 0.05 },
+                ModelConfig::Ct { turn_dps: -3.0, q: 0.05 },
+                ModelConfig::Cs { alpha: 0.5, a_max: 6.0 },
+            ],
+            stay: 0.9,
+            transition: None,
+            vertical_q: 0.5,
+            period_by_nacp: [1.0, 1.0, 1.0, 1.0, 1.0, 0.8, 0.6, 0.6, 0.6, 0.8, 1.0, 1.0],
+            period_default_s: 1.0,
+            reorder_window_s: 2.0,
+            adsb_time_sigma_gps_s: 0.01,
+            adsb_time_sigma_arrival_s: 0.1,
+            mlat_sync_inflation: 4.0,
+            vb: true,
+            vb_forgetting: 0.95,
+            vb_prior: 5.0,
+            gate_probability: 0.9999,
+            max_gated_in_a_row: 5,
+            confirm_m: 3,
+            confirm_n: 5,
+            coast_after_s: 3.0,
+            drop_after_s: 20.0,
+            max_tracks: 20_000,
+            motion_window: 5,
+            motion_interval_s: 1.0,
+            motion_false_alarm: 0.05,
+        }
+    }
+}
+
+impl TrackConfig {
+    /// Every problem at once, one per line.
+    pub fn validate(&self) -> Result<(), String> {
+        let mut errs = Vec::new();
+        if self.models.is_empty() {
+            errs.push("models: at least one model".to_string());
+        }
+        for (i, m) in self.models.iter().enumerate() {
+            if let Err(e) = m.check() {
+                errs.push(format!("models[{i}]: {e}"));
+            }
+        }
+        if let Some(t) = &self.transition {
+            let n = self.models.len();
+            if t.len() != n || t.iter().any(|r| r.len() != n) {
+                errs.push(format!("transition must be {n}x{n}, one row and column per model"));
+            } else if t.iter().any(|r| {
+                r.iter().any(|p| !(0.0..=1.0).contains(p)) || (r.iter().sum::<f64>() - 1.0).abs() > 1e-6
+            }) {
+                errs.push("transition rows must be probabilities summing to 1".into());
+            }
+        } else if !(self.stay > 0.0 && self.stay <= 1.0) {
+            errs.push(format!("stay = {} must be in (0, 1]", self.stay));
+        }
+        let pos = |v: f64| v.is_finite() && v > 0.0;
+        for (name, v) in [
+            ("vertical_q", self.vertical_q),
+            ("period_default_s", self.period_default_s),
+            ("reorder_window_s", self.reorder_window_s),
+            ("coast_after_s", self.coast_after_s),
+            ("drop_after_s", self.drop_after_s),
+            ("motion_interval_s", self.motion_interval_s),
+        ] {
+            if !pos(v) {
+                errs.push(format!("{name} = {v} must be positive"));
+            }
+        }
+        if let Some(p) = self.period_by_nacp.iter().find(|p| !pos(**p) || **p > 60.0) {
+            errs.push(format!("period_by_nacp: {p} must be in (0, 60]"));
+        }
+        for (name, v) in [
+            ("adsb_time_sigma_gps_s", self.adsb_time_sigma_gps_s),
+            ("adsb_time_sigma_arrival_s", self.adsb_time_sigma_arrival_s),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                errs.push(format!("{name} = {v} must be zero or positive"));
+            }
+        }
+        if !(self.mlat_sync_inflation.is_finite() && self.mlat_sync_inflation >= 1.0) {
+            errs.push(format!("mlat_sync_inflation = {} must be at least 1", self.mlat_sync_inflation));
+        }
+        if !(self.vb_forgetting > 0.0 && self.vb_forgetting <= 1.0) {
+            errs.push(format!("vb_forgetting = {} must be in (0, 1]", self.vb_forgetting));
+        }
+        if !pos(self.vb_prior) {
+            errs.push(format!("vb_prior = {} must be positive", self.vb_prior));
+        }
+        if !(self.gate_probability > 0.5 && self.gate_probability < 1.0) {
+            errs.push(format!("gate_probability = {} must be in (0.5, 1)", self.gate_probability));
+        }
+        if self.confirm_m == 0 || self.confirm_m > self.confirm_n || self.confirm_n > 32 {
+            errs.push(format!(
+                "confirm_m = {} of confirm_n = {}: need 1 <= m <= n <= 32",
+                self.confirm_m, self.confirm_n
+            ));
+        }
+        if self.max_tracks == 0 {
+            errs.push("max_tracks must be positive".into());
+        }
+        if self.motion_window < 2 || !(self.motion_false_alarm > 0.0 && self.motion_false_alarm < 1.0) {
+            errs.push("motion_window must be at least 2 and motion_false_alarm in (0, 1)".into());
+        }
+        if errs.is_empty() {
+            Ok(())
+        } else {
+            Err(errs.join("\n"))
+        }
+    }
+
+    pub fn imm_spec(&self) -> Arc<ImmSpec> {
+        let n = self.models.len();
+        let transition = match &self.transition {
+            Some(t) => DMatrix::from_fn(n, n, |r, c| t[r][c]),
+            None => super::Imm::sticky(n, self.stay),
+        };
+        Arc::new(ImmSpec { models: self.models.iter().map(ModelConfig::model).collect(), transition })
+    }
+
+    /// The output period for a NACp (s).
+    pub fn period_s(&self, nac_p: Option<u8>) -> f64 {
+        match nac_p {
+            Some(n) => self.period_by_nacp[(n as usize).min(11)],
+            None => self.period_default_s,
+        }
+    }
+
+    /// The densest period of the table: used while a track is in conflict.
+    pub fn densest_period_s(&self) -> f64 {
+        self.period_by_nacp.iter().copied().fold(self.period_default_s, f64::min)
+    }
+}

@@ -1,0 +1,700 @@
+//! One aircraft's track: a horizontal IMM in a re-centred local plane, a
+//! vertical channel, a variational-Bayes scale of each source's measurement
+//! noise, and a short history so late measurements are applied in time order.
+//!
+//! Why a history: MLAT fixes arrive after the copies of their transmission
+//! have been collected (half a second), ADS-B positions straight away, so a
+//! track sees measurements out of time order all the time. Each stored
+//! measurement keeps the state from before it; a late one restores the state
+//! before its time and the newer ones are re-applied after it. The cost is a
+//! few re-runs of a 1-2 microsecond step, and the result is the same as if
+//! everything had arrived in order.
+//!
+//! Why VB: a transponder's NACp is a claim. The noise actually seen is
+//! estimated Särkkä-Nummenmaa style, as an inverse-gamma scale on the
+//! nominal covariance, updated by fixed-point iterations of the update with
+//! forgetting; a source that claims better than it is gets its covariance
+//! scaled up and the track stays consistent. Gated measurements still teach
+//! the scale (from the innovation), else an over-claiming source would be
+//! gated forever.
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+
+use nalgebra::{Matrix2, Matrix6, Vector2, Vector6};
+
+use super::config::TrackConfig;
+use super::imm::{Imm, ImmSpec};
+use super::kf::{self, Gaussian, Linear};
+use super::plane::Plane;
+
+/// Who measured.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Source {
+    Adsb = 0,
+    Mlat = 1,
+}
+
+impl Source {
+    pub fn name(self) -> &'static str {
+        match self {
+            Source::Adsb => "adsb",
+            Source::Mlat => "mlat",
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Observation {
+    /// Horizontal position with its covariance (east/north, m^2), an
+    /// optional height (m, variance) and the 1-sigma uncertainty of the
+    /// measurement's time (s), which becomes along-track error.
+    /// `surface`: an ADS-B surface position.
+    Position {
+        lat: f64,
+        lon: f64,
+        cov_en: Matrix2<f64>,
+        height: Option<(f64, f64)>,
+        time_sigma_s: f64,
+        surface: bool,
+    },
+    /// Ground velocity (east, north m/s, covariance) and climb rate (m/s, variance).
+    Velocity { v_en: Vector2<f64>, cov: Matrix2<f64>, climb: Option<(f64, f64)> },
+    /// Height only (m, variance): a Mode S altitude reply.
+    Height { h: f64, var: f64 },
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Measurement {
+    /// Time of applicability (Unix s).
+    pub t: f64,
+    pub source: Source,
+    pub obs: Observation,
+}
+
+/// What became of a measurement.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Outcome {
+    /// Applied; the NIS of a position (2 dof), else 0.
+    Applied { nis: f64 },
+    /// A position the track's gate rejected as an outlier.
+    Gated,
+    /// Older than the reorder window: not applied.
+    TooLate,
+    /// Nothing to apply it to yet (a velocity before any position).
+    Early,
+    /// The filter went numerically bad (or the data forced a restart): the
+    /// track restarted on this measurement.
+    Restarted,
+}
+
+/// Inverse-gamma scale of a source's nominal measurement covariance.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Vb {
+    pub alpha: f64,
+    pub beta: f64,
+}
+
+impl Vb {
+    fn prior(weight: f64) -> Vb {
+        Vb { alpha: weight, beta: weight }
+    }
+
+    pub fn scale(&self) -> f64 {
+        self.beta / self.alpha
+    }
+}
+
+/// Vertical channel: WGS-84 height and climb rate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Vertical {
+    pub x: Vector2<f64>,
+    pub p: Matrix2<f64>,
+}
+
+impl Vertical {
+    fn predict(&mut self, dt: f64, q: f64) {
+        let f = Matrix2::new(1.0, dt, 0.0, 1.0);
+        let qm = Matrix2::new(dt.powi(3) / 3.0, dt * dt / 2.0, dt * dt / 2.0, dt) * q;
+        self.x = f * self.x;
+        self.p = f * self.p * f.transpose() + qm;
+    }
+
+    /// Applies a height (row 0) or climb rate (row 1); an outlier beyond the
+    /// 4.5-sigma gate is left out.
+    fn update(&mut self, row: usize, z: f64, var: f64) {
+        let s = self.p[(row, row)] + var;
+        let nu = z - self.x[row];
+        if !(s > 0.0 && s.is_finite()) || nu * nu / s > 4.5 * 4.5 {
+            return;
+        }
+        let k = self.p.column(row) / s;
+        self.x += k * nu;
+        let ikh = Matrix2::identity()
+            - k * Vector2::new((row == 0) as u8 as f64, (row == 1) as u8 as f64).transpose();
+        self.p = ikh * self.p * ikh.transpose() + k * var * k.transpose();
+    }
+}
+
+/// Everything a measurement changes: copied before each one for re-runs.
+#[derive(Clone, Debug)]
+struct State {
+    /// Newest measurement, newest horizontal and newest vertical update.
+    t: f64,
+    t_h: f64,
+    t_v: f64,
+    plane: Option<Plane>,
+    imm: Option<Imm>,
+    vertical: Option<Vertical>,
+    vb: [Vb; 2],
+    gated_in_a_row: u32,
+}
+
+/// A track's estimate at a time, ready to publish or fuse.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Estimate {
+    pub t: f64,
+    pub lat: f64,
+    pub lon: f64,
+    pub alt_m: Option<f64>,
+    /// East, north, up (m/s); up 0 when the height is unknown.
+    pub vel_enu: [f64; 3],
+    /// Horizontal state and covariance in `plane`.
+    pub plane: Plane,
+    pub state: Gaussian,
+}
+
+impl Estimate {
+    pub fn cov_en(&self) -> [[f64; 2]; 2] {
+        let p = &self.state.p;
+        [[p[(0, 0)], p[(0, 1)]], [p[(1, 0)], p[(1, 1)]]]
+    }
+
+    /// The horizontal state expressed in another plane.
+    pub fn in_plane(&self, other: &Plane) -> Gaussian {
+        transfer(&self.state, &self.plane, other)
+    }
+}
+
+/// `I - K H` of an update: the posterior covariance times the prior's inverse.
+fn gain(prior: &Gaussian, post: &Gaussian) -> Option<Matrix6<f64>> {
+    Some(post.p * prior.p.cholesky()?.inverse())
+}
+
+/// A horizontal state moved from one plane to another: the position through
+/// geodetic coordinates, vectors and covariance rotated by the planes' angle.
+pub fn transfer(g: &Gaussian, from: &Plane, to: &Plane) -> Gaussian {
+    if from == to {
+        return *g;
+    }
+    let r = from.rotation_to(to);
+    let mut t = Matrix6::zeros();
+    for b in 0..3 {
+        t.fixed_view_mut::<2, 2>(2 * b, 2 * b).copy_from(&r);
+    }
+    let mut x = t * g.x;
+    let (lat, lon) = from.to_geodetic(g.x[0], g.x[1]);
+    let en = to.to_en(lat, lon);
+    x[0] = en[0];
+    x[1] = en[1];
+    let p = t * g.p * t.transpose();
+    Gaussian { x, p: (p + p.transpose()) * 0.5 }
+}
+
+/// Lifecycle stage.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    Tentative,
+    Confirmed,
+}
+
+/// Height variance (m^2) from which a height is taken to carry a persistent offset.
+const BIASED_HEIGHT_VAR: f64 = 40.0 * 40.0;
+/// Past this distance from its plane's origin a track moves the origin (m).
+const RECENTRE_M: f64 = 20_000.0;
+/// Initial velocity uncertainty without a velocity report (m/s, 1 sigma).
+const INIT_SPEED_SIGMA: f64 = 150.0;
+const INIT_ACCEL_SIGMA: f64 = 2.0;
+
+#[derive(Clone, Debug)]
+pub struct Track {
+    spec: Arc<ImmSpec>,
+    cfg: Arc<TrackConfig>,
+    gate: f64,
+    state: State,
+    /// Measurements within the reorder window, in time order, each with the state before it.
+    history: VecDeque<(Measurement, State)>,
+    /// Recent position outcomes, newest in bit 0 (1 = accepted).
+    hits: u32,
+    seen: u32,
+    pub stage: Stage,
+    /// Time of the newest accepted position (Unix s).
+    pub last_position_t: f64,
+    pub restarts: u64,
+    /// Keep `I - K H` of each update (for the cross-covariance of track fusion).
+    pub keep_gain: bool,
+    /// Time and `I - K H` (posterior covariance times the prior's inverse) of the newest update.
+    pub gain: Option<(f64, Matrix6<f64>)>,
+}
+
+impl Track {
+    pub fn new(cfg: Arc<TrackConfig>, spec: Arc<ImmSpec>) -> Track {
+        let gate = statrs::distribution::ContinuousCDF::inverse_cdf(
+            &statrs::distribution::ChiSquared::new(2.0).expect("2 dof"),
+            cfg.gate_probability,
+        );
+        let prior = Vb::prior(cfg.vb_prior);
+        Track {
+            spec,
+            gate,
+            state: State {
+                t: f64::NEG_INFINITY,
+                t_h: f64::NEG_INFINITY,
+                t_v: f64::NEG_INFINITY,
+                plane: None,
+                imm: None,
+                vertical: None,
+                vb: [prior; 2],
+                gated_in_a_row: 0,
+            },
+            cfg,
+            history: VecDeque::new(),
+            hits: 0,
+            seen: 0,
+            stage: Stage::Tentative,
+            last_position_t: f64::NEG_INFINITY,
+            restarts: 0,
+            keep_gain: false,
+            gain: None,
+        }
+    }
+
+    /// Time of the newest applied measurement.
+    pub fn t(&self) -> f64 {
+        self.state.t
+    }
+
+    pub fn vb_scale(&self, source: Source) -> f64 {
+        self.state.vb[source as usize].scale()
+    }
+
+    /// Ground speed of the current estimate (m/s).
+    pub fn speed(&self) -> Option<f64> {
+        let x = self.state.imm.as_ref()?.estimate().x;
+        Some(x[2].hypot(x[3]))
+    }
+
+    pub fn has_position(&self) -> bool {
+        self.state.imm.is_some()
+    }
+
+    /// Applies a measurement in its time order.
+    pub fn apply(&mut self, m: Measurement) -> Outcome {
+        let oldest = self.history.front().map_or(f64::NEG_INFINITY, |(h, _)| h.t);
+        let outcome = if m.t >= self.state.t {
+            self.apply_and_store(m)
+        } else if m.t < oldest || m.t < self.state.t - self.cfg.reorder_window_s {
+            return Outcome::TooLate;
+        } else {
+            // Back to the state before the first newer measurement, then
+            // this one and the newer ones again, in order.
+            let i = self.history.partition_point(|(h, _)| h.t <= m.t);
+            let mut tail = self.history.drain(i..);
+            let (first, before) = tail.next().expect("a newer measurement exists");
+            let rest: Vec<Measurement> = std::iter::once(first).chain(tail.map(|(h, _)| h)).collect();
+            self.state = before;
+            let o = self.apply_and_store(m);
+            for h in rest {
+                self.apply_and_store(h);
+            }
+            o
+        };
+        if let Observation::Position { .. } = m.obs {
+            self.record_hit(matches!(outcome, Outcome::Applied { .. } | Outcome::Restarted), m.t);
+        }
+        let horizon = self.state.t - self.cfg.reorder_window_s;
+        while self.history.len() > 1 && self.history[1].0.t < horizon {
+            self.history.pop_front();
+        }
+        outcome
+    }
+
+    fn apply_and_store(&mut self, m: Measurement) -> Outcome {
+        let before = self.state.clone();
+        let o = self.apply_one(&m);
+        self.history.push_back((m, before));
+        o
+    }
+
+    fn record_hit(&mut self, hit: bool, t: f64) {
+        self.hits = (self.hits << 1) | hit as u32;
+        self.seen = (self.seen + 1).min(32);
+        if hit {
+            self.last_position_t = self.last_position_t.max(t);
+        }
+        let window = self.cfg.confirm_n.min(self.seen);
+        let mask = if window >= 32 { u32::MAX } else { (1u32 << window) - 1 };
+        if (self.hits & mask).count_ones() >= self.cfg.confirm_m {
+            self.stage = Stage::Confirmed;
+        }
+    }
+
+    fn apply_one(&mut self, m: &Measurement) -> Outcome {
+        let dt = if self.state.t_h.is_finite() { m.t - self.state.t_h } else { 0.0 };
+        let outcome = match m.obs {
+            Observation::Position { lat, lon, cov_en, height, time_sigma_s, .. } => {
+                if let Some((h, var)) = height {
+                    self.vertical(m.t, 0, h, var);
+                }
+                self.position(m.t, dt, lat, lon, cov_en, time_sigma_s, m.source)
+            }
+            Observation::Velocity { v_en, cov, climb } => {
+                if let Some((c, var)) = climb {
+                    self.vertical(m.t, 1, c, var);
+                }
+                match &mut self.state.imm {
+                    None => Outcome::Early,
+                    Some(imm) => match (imm.predicted(dt), imm.step_linear(dt, &kf::velocity(v_en, cov))) {
+                        (pred, Some(step)) => {
+                            if self.keep_gain {
+                                self.gain = gain(&pred, &step.estimate).map(|a| (m.t, a));
+                            }
+                            Outcome::Applied { nis: 0.0 }
+                        }
+                        (_, None) => {
+                            tracing::warn!("track filter went numerically bad on a velocity; restarting");
+                            self.state.imm = None;
+                            self.state.plane = None;
+                            self.restarts += 1;
+                            Outcome::Restarted
+                        }
+                    },
+                }
+            }
+            Observation::Height { h, var } => {
+                self.vertical(m.t, 0, h, var);
+                Outcome::Applied { nis: 0.0 }
+            }
+        };
+        // The horizontal filter moved to m.t only if it took the measurement.
+        if matches!(outcome, Outcome::Applied { .. } | Outcome::Restarted)
+            && !matches!(m.obs, Observation::Height { .. })
+            && self.state.imm.is_some()
+        {
+            self.state.t_h = m.t;
+        }
+        self.state.t = m.t;
+        outcome
+    }
+
+    /// A vertical measurement: height (row 0) or climb rate (row 1).
+    ///
+    /// Heights as uncertain as a barometric altitude without the GNSS
+    /// difference carry an offset that persists (pressure, temperature):
+    /// averaging many of them would not remove it, so they only keep the
+    /// channel within their own uncertainty, never below it.
+    fn vertical(&mut self, t: f64, row: usize, z: f64, var: f64) {
+        match &mut self.state.vertical {
+            Some(v) => {
+                v.predict(t - self.state.t_v, self.cfg.vertical_q);
+                if !(row == 0 && var >= BIASED_HEIGHT_VAR && v.p[(0, 0)] < var) {
+                    v.update(row, z, var);
+                }
+            }
+            None if row == 0 => {
+                self.state.vertical =
+                    Some(Vertical { x: Vector2::new(z, 0.0), p: Matrix2::new(var, 0.0, 0.0, 25.0) })
+            }
+            None => return,
+        }
+        self.state.t_v = t;
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn position(
+        &mut self,
+        t: f64,
+        dt: f64,
+        lat: f64,
+        lon: f64,
+        cov_en: Matrix2<f64>,
+        time_sigma_s: f64,
+        source: Source,
+    ) -> Outcome {
+        let (Some(plane), Some(imm)) = (self.state.plane, self.state.imm.as_mut()) else {
+            self.start(lat, lon, cov_en);
+            return Outcome::Applied { nis: 0.0 };
+        };
+        let z = Vector2::from(plane.to_en(lat, lon));
+        let pred = imm.predicted(dt);
+        // The report's time error moves it along the velocity.
+        let v = pred.x.fixed_rows::<2>(2).into_owned();
+        let nominal = cov_en + v * v.transpose() * (time_sigma_s * time_sigma_s);
+        let vb = &mut self.state.vb[source as usize];
+        if self.cfg.vb {
+            let rho = self.cfg.vb_forgetting;
+            vb.alpha = rho * vb.alpha + (1.0 - rho) * self.cfg.vb_prior;
+            vb.beta = rho * vb.beta + (1.0 - rho) * self.cfg.vb_prior;
+        }
+        let Some(nom_inv) = nominal.try_inverse() else {
+            return Outcome::Gated;
+        };
+        let h = kf::h();
+        let linear = |scale: f64| Linear { h, z, r: nominal * scale };
+        let nis = {
+            let (nu, s) = pred.innovation(&linear(vb.scale()));
+            s.try_inverse().map_or(f64::INFINITY, |si| (nu.transpose() * si * nu)[0])
+        };
+        // NaN (a degenerate innovation) is gated too.
+        if nis.is_nan() || nis > self.gate {
+            self.state.gated_in_a_row += 1;
+            if self.cfg.vb {
+                // Learn from the innovation what the update cannot show.
+                let (nu, _) = pred.innovation(&linear(1.0));
+                let hph = h * pred.p * h.transpose();
+                let excess = (nom_inv * (nu * nu.transpose() - hph)).trace().max(0.0);
+                vb.alpha += 1.0;
+                vb.beta += 0.5 * excess;
+            }
+            if self.state.gated_in_a_row > self.cfg.max_gated_in_a_row {
+                self.restarts += 1;
+                self.start(lat, lon, cov_en);
+                return Outcome::Restarted;
+            }
+            return Outcome::Gated;
+        }
+        self.state.gated_in_a_row = 0;
+        let saved = imm.clone();
+        let (alpha0, beta0) = (vb.alpha + 1.0, vb.beta);
+        let mut scale = vb.scale();
+        let mut done = None;
+        // Fixed-point iterations of the VB update (one without VB).
+        for _ in 0..if self.cfg.vb { 3 } else { 1 } {
+            *imm = saved.clone();
+            let Some(step) = imm.step_linear(dt, &linear(scale)) else {
+                break;
+            };
+            done = Some(step);
+            if !self.cfg.vb {
+                break;
+            }
+            let post = step.estimate;
+            let res = z - h * post.x;
+            let e = nom_inv * (res * res.transpose() + h * post.p * h.transpose());
+            let beta = beta0 + 0.5 * e.trace();
+            let new_scale = beta / alpha0;
+            vb.alpha = alpha0;
+            vb.beta = beta;
+            let converged = (new_scale / scale - 1.0).abs() < 0.02;
+            scale = new_scale;
+            if converged {
+                break;
+            }
+        }
+        match done {
+            Some(step) => {
+                if self.keep_gain {
+                    self.gain = gain(&pred, &step.estimate).map(|a| (t, a));
+                }
+                self.maybe_recentre();
+                Outcome::Applied { nis: step.nis }
+            }
+            None => {
+                tracing::warn!("track filter went numerically bad; restarted");
+                self.restarts += 1;
+                self.start(lat, lon, cov_en);
+                Outcome::Restarted
+            }
+        }
+    }
+
+    /// (Re)starts the horizontal filter on a position: velocity unknown.
+    fn start(&mut self, lat: f64, lon: f64, cov_en: Matrix2<f64>) {
+        let plane = Plane::new(lat, lon, self.state.vertical.map_or(0.0, |v| v.x[0]));
+        let vs = INIT_SPEED_SIGMA * INIT_SPEED_SIGMA;
+        let va = INIT_ACCEL_SIGMA * INIT_ACCEL_SIGMA;
+        let mut p = Matrix6::from_diagonal(&Vector6::new(0.0, 0.0, vs, vs, va, va));
+        p.fixed_view_mut::<2, 2>(0, 0).copy_from(&cov_en);
+        self.state.plane = Some(plane);
+        self.state.imm = Some(Imm::with_spec(self.spec.clone(), Gaussian { x: Vector6::zeros(), p }));
+        self.state.gated_in_a_row = 0;
+    }
+
+    fn maybe_recentre(&mut self) {
+        let (Some(plane), Some(imm)) = (self.state.plane, self.state.imm.as_mut()) else {
+            return;
+        };
+        let x = imm.estimate().x;
+        if x[0].hypot(x[1]) < RECENTRE_M {
+            return;
+        }
+        let (lat, lon) = plane.to_geodetic(x[0], x[1]);
+        let new = Plane::new(lat, lon, self.state.vertical.map_or(plane.h, |v| v.x[0]));
+        for f in &mut imm.filters {
+            *f = transfer(f, &plane, &new);
+        }
+        self.state.plane = Some(new);
+    }
+
+    /// The estimate at `t`: the state after every measurement up to `t`,
+    /// predicted to `t`. `None` before the first position, for a time older
+    /// than the history, or when the state is not healthy (never published).
+    pub fn estimate_at(&self, t: f64) -> Option<Estimate> {
+        let state = if t >= self.state.t {
+            &self.state
+        } else {
+            let i = self.history.partition_point(|(h, _)| h.t <= t);
+            if i == 0 {
+                return None;
+            }
+            match self.history.get(i) {
+                Some((_, before)) => before,
+                None => &self.state,
+            }
+        };
+        let (plane, imm) = (state.plane?, state.imm.as_ref()?);
+        let g = imm.predicted(t - state.t_h);
+        if !g.healthy() {
+            return None;
+        }
+        let (lat, lon) = plane.to_geodetic(g.x[0], g.x[1]);
+        let vertical = state.vertical.map(|mut v| {
+            v.predict(t - state.t_v, self.cfg.vertical_q);
+            v
+        });
+        Some(Estimate {
+            t,
+            lat,
+            lon,
+            alt_m: vertical.map(|v| v.x[0]),
+            vel_enu: [g.x[2], g.x[3], vertical.map_or(0.0, |v| v.x[1])],
+            plane,
+            state: g,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pos(t: f64, lat: f64, lon: f64, sigma: f64) -> Measurement {
+        Measurement {
+            t,
+            source: Source::Adsb,
+            obs: Observation::Position {
+                lat,
+                lon,
+                cov_en: Matrix2::identity() * sigma * sigma,
+                height: Some((3000.0, 100.0)),
+                time_sigma_s: 0.0,
+                surface: false,
+            },
+        }
+    }
+
+    fn track() -> Track {
+        let cfg = Arc::new(TrackConfig::default());
+        Track::new(cfg.clone(), cfg.imm_spec())
+    }
+
+    /// Straight east at 200 m/s from (45, 5).
+    fn truth(t: f64) -> (f64, f64) {
+        crate::geo::displace(45.0, 5.0, 3000.0, [200.0 * t, 0.0, 0.0]).into_tuple2()
+    }
+
+    trait Tuple2 {
+        fn into_tuple2(self) -> (f64, f64);
+    }
+    impl Tuple2 for (f64, f64, f64) {
+        fn into_tuple2(self) -> (f64, f64) {
+            (self.0, self.1)
+        }
+    }
+
+    #[test]
+    fn late_measurements_give_the_same_track_as_in_order() {
+        let ms: Vec<Measurement> = (0..40)
+            .map(|k| {
+                let t = k as f64 * 0.5;
+                let (lat, lon) = truth(t);
+                // A deterministic wobble as noise.
+                let d = 20.0 * ((k * 7919) % 13) as f64 / 13.0 - 10.0;
+                let (lat, lon, _) = crate::geo::displace(lat, lon, 3000.0, [d, -d, 0.0]);
+                pos(t, lat, lon, 10.0)
+            })
+            .collect();
+        let mut a = track();
+        for m in &ms {
+            a.apply(*m);
+        }
+        // Same measurements with every third one held back by 0.7 s.
+        let mut b = track();
+        let mut held: Vec<Measurement> = Vec::new();
+        for (k, m) in ms.iter().enumerate() {
+            held.retain(|h| {
+                if h.t + 0.7 <= m.t {
+                    b.apply(*h);
+                    false
+                } else {
+                    true
+                }
+            });
+            if k % 3 == 1 {
+                held.push(*m);
+            } else {
+                b.apply(*m);
+            }
+        }
+        for h in held {
+            b.apply(h);
+        }
+        let (ea, eb) = (a.estimate_at(19.5).unwrap(), b.estimate_at(19.5).unwrap());
+        assert!((ea.state.x - eb.state.x).norm() < 1e-6, "{:?} vs {:?}", ea.state.x, eb.state.x);
+        assert!((ea.state.p - eb.state.p).norm() < 1e-6);
+        // And it tracks: within a few metres, moving east at 200 m/s.
+        let (lat, lon) = truth(19.5);
+        assert!(crate::geo::distance_m(lat, lon, ea.lat, ea.lon) < 15.0);
+        assert!((ea.vel_enu[0] - 200.0).abs() < 5.0 && ea.vel_enu[1].abs() < 5.0, "{:?}", ea.vel_enu);
+        assert_eq!(a.stage, Stage::Confirmed);
+        // Older than the window: refused, not misapplied.
+        assert_eq!(b.apply(pos(1.0, 45.0, 5.0, 10.0)), Outcome::TooLate);
+    }
+
+    #[test]
+    fn a_long_flight_recentres_without_a_jump() {
+        let mut tr = track();
+        let mut worst: f64 = 0.0;
+        for k in 0..600 {
+            let t = k as f64;
+            let (lat, lon) = truth(t);
+            tr.apply(pos(t, lat, lon, 5.0));
+            if k > 10 {
+                let e = tr.estimate_at(t).unwrap();
+                worst = worst.max(crate::geo::distance_m(lat, lon, e.lat, e.lon));
+            }
+        }
+        // 120 km flown: several re-centrings, no error beyond the noise level.
+        assert!(worst < 5.0, "worst {worst}");
+        assert!(tr.estimate_at(599.0).unwrap().state.x.fixed_rows::<2>(0).norm() < RECENTRE_M);
+    }
+
+    #[test]
+    fn vb_learns_a_source_that_claims_too_much() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let real = Normal::new(0.0, 100.0).unwrap();
+        let mut tr = track();
+        for k in 0..200 {
+            let t = k as f64;
+            let (lat, lon) = truth(t);
+            let (lat, lon, _) =
+                crate::geo::displace(lat, lon, 3000.0, [real.sample(&mut rng), real.sample(&mut rng), 0.0]);
+            tr.apply(pos(t, lat, lon, 10.0));
+        }
+        // Claimed 10 m, real 100 m: the scale approaches 100.
+        let s = tr.vb_scale(Source::Adsb);
+        assert!((50.0..200.0).contains(&s), "scale {s}");
+    }
+}
