@@ -9,7 +9,7 @@ use serde::Deserialize;
 
 use crate::core::CoreConfig;
 
-#[derive(Clone, Debug, Default, Deserialize)]
+#[derive(Clone, Debug, Default, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Config {
     pub core: CoreConfig,
@@ -59,10 +59,24 @@ mod tests {
         // Same values: the example shows the defaults.
         assert_eq!(format!("{example:?}"), format!("{defaults:?}"));
         // Every field: an example missing one would still parse (defaults), so
-        // count the documented keys against the fields serde knows.
-        let keys = text.lines().filter(|l| l.contains(" = ") && !l.trim_start().starts_with('#')).count();
-        let fields = format!("{defaults:?}").matches(": ").count() - 2; // minus the two sections
-        assert_eq!(keys, fields, "config/fuse1090.toml must list every field");
+        // compare the documented keys with the fields serde writes.
+        fn keys(v: &toml::Value, prefix: &str, out: &mut Vec<String>) {
+            if let toml::Value::Table(t) = v {
+                for (k, v) in t {
+                    let path = format!("{prefix}{k}");
+                    match v {
+                        toml::Value::Table(_) => keys(v, &format!("{path}."), out),
+                        _ => out.push(path),
+                    }
+                }
+            }
+        }
+        let (mut documented, mut fields) = (Vec::new(), Vec::new());
+        keys(&text.parse::<toml::Value>().unwrap(), "", &mut documented);
+        keys(&toml::Value::try_from(&defaults).unwrap(), "", &mut fields);
+        documented.sort();
+        fields.sort();
+        assert_eq!(documented, fields, "config/fuse1090.toml must list every field");
     }
 
     #[test]

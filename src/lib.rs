@@ -11,6 +11,7 @@ pub mod config;
 pub mod core;
 pub mod eval;
 pub mod feed;
+pub mod fuse;
 pub mod geo;
 pub mod mlat;
 pub mod modes;

@@ -112,7 +112,9 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
         Ok((reader.skipped, reader.errors))
     });
     let mut out = BufWriter::with_capacity(1 << 20, out_file);
-    let mut core = Core::new(&cfg.core);
+    let mut core_cfg = cfg.core.clone();
+    core_cfg.publish_source_tracks = cfg.publish_source_tracks;
+    let mut core = Core::new(&core_cfg);
     let mut ids: Vec<String> = Vec::new();
     let mut events = Vec::new();
     let (mut first, mut last) = (f64::INFINITY, f64::NEG_INFINITY);
@@ -143,6 +145,7 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
     flush(&mut events, &ids, &mut out)?;
     out.flush().context("writing output")?;
     eprintln!("{}", core.mlat().report(last, &|k| ids[k].clone()));
+    eprintln!("tracking: {:?}", core.fuser().stats());
     for e in &errors {
         eprintln!("fuse1090: skipped {e}");
     }
@@ -155,7 +158,7 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
         messages: s.messages,
         aircraft: core.decoder().stats().aircraft_created,
         fixes: s.fixes,
-        tracks: 0,
+        tracks: core.fuser().stats().tracks_created,
         positions: s.positions,
         skipped_lines: skipped,
         span_s: if last >= first { last - first } else { 0.0 },

@@ -14,14 +14,16 @@ use serde::Deserialize;
 
 use crate::feed::capture::{ClockKind, ReceiverDecl};
 use crate::feed::RawFrame;
+use crate::fuse::{FuseConfig, Fuser, TrackReport};
 use crate::geo::geodetic_to_ecef;
-use crate::geo::FT_TO_M;
+use crate::geo::{FT_TO_M, KT_TO_MS};
 use crate::mlat::group::{Added, Group, GroupInfo, Grouper};
 use crate::mlat::{Mlat, MlatConfig, MlatFix};
 use crate::modes::nic::{nacp_epu_m, nucp_hpl_m};
 use crate::modes::{Body, Decoder, DecoderConfig, Es};
+use crate::track::{Measurement, Observation, Source, TrackConfig};
 
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct CoreConfig {
     /// How long copies of one transmission are collected after the first (s).
@@ -33,6 +35,11 @@ pub struct CoreConfig {
     /// Aircraft not heard for this long are forgotten (s).
     pub aircraft_ttl_s: f64,
     pub mlat: MlatConfig,
+    pub track: TrackConfig,
+    pub fuse: FuseConfig,
+    /// Publish per-source (adsb, mlat) tracks beside the fused ones.
+    #[serde(skip)]
+    pub publish_source_tracks: bool,
 }
 
 impl Default for CoreConfig {
@@ -43,6 +50,9 @@ impl Default for CoreConfig {
             max_range_km: 600.0,
             aircraft_ttl_s: 300.0,
             mlat: MlatConfig::default(),
+            track: TrackConfig::default(),
+            fuse: FuseConfig::default(),
+            publish_source_tracks: false,
         }
     }
 }
@@ -61,6 +71,8 @@ impl CoreConfig {
         if !self.aircraft_ttl_s.is_finite() || self.aircraft_ttl_s <= 0.0 {
             return Err(format!("aircraft_ttl_s = {} must be positive", self.aircraft_ttl_s));
         }
+        self.track.validate().map_err(|e| format!("[core.track] {e}"))?;
+        self.fuse.validate().map_err(|e| format!("[core.fuse] {e}"))?;
         Ok(())
     }
 }
@@ -78,9 +90,13 @@ pub struct PositionReport {
     /// reported GNSS-baro difference when known.
     pub alt_m: Option<f64>,
     pub alt_baro_ft: Option<i32>,
+    /// 1-sigma error of `alt_m` as a WGS-84 height (m).
+    pub alt_sigma_m: Option<f64>,
     pub nac_p: Option<u8>,
     /// 1-sigma horizontal error per axis (m) implied by NACp (or NUCp).
     pub sigma_m: Option<f64>,
+    /// Timed by a GPS receiver clock (else by arrival at the server).
+    pub gps_timed: bool,
     pub surface: bool,
     pub rx: usize,
 }
@@ -89,6 +105,7 @@ pub struct PositionReport {
 pub enum Event {
     Position(PositionReport),
     Mlat(MlatFix),
+    Track(Box<TrackReport>),
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -101,6 +118,8 @@ pub struct CoreStats {
     pub messages: u64,
     pub positions: u64,
     pub fixes: u64,
+    /// ADS-B positions without a known accuracy (no NACp or NUCp): not tracked.
+    pub untracked_positions: u64,
 }
 
 struct RxState {
@@ -113,8 +132,14 @@ pub struct Core {
     decoder: Decoder,
     grouper: Grouper,
     mlat: Mlat,
+    fuser: Fuser,
+    tracks_out: Vec<TrackReport>,
     stats: CoreStats,
     min_sync_nacp: u8,
+    baro_sigma_m: f64,
+    /// Time-of-applicability sigma of ADS-B positions: GPS-timed, arrival-timed (s).
+    time_sigma: (f64, f64),
+    sync_inflation: f64,
 }
 
 impl Core {
@@ -130,8 +155,13 @@ impl Core {
             decoder: Decoder::new(dcfg),
             grouper: Grouper::new(cfg.group_wait_s, cfg.max_pending_groups),
             mlat: Mlat::new(cfg.mlat.clone()),
+            fuser: Fuser::new(cfg.fuse.clone(), cfg.track.clone(), cfg.publish_source_tracks),
+            tracks_out: Vec::new(),
             stats: CoreStats::default(),
             min_sync_nacp: cfg.mlat.min_sync_nacp,
+            baro_sigma_m: cfg.mlat.baro_sigma_m,
+            time_sigma: (cfg.track.adsb_time_sigma_gps_s, cfg.track.adsb_time_sigma_arrival_s),
+            sync_inflation: cfg.track.mlat_sync_inflation,
         }
     }
 
@@ -161,26 +191,70 @@ impl Core {
         &self.mlat
     }
 
-    /// Moves time forward to `now` (arrival-time scale): groups whose wait ran out are processed.
+    pub fn fuser(&self) -> &Fuser {
+        &self.fuser
+    }
+
+    /// Moves time forward to `now` (arrival-time scale): groups whose wait
+    /// ran out are processed, held track publications released.
     pub fn advance(&mut self, now: f64, out: &mut Vec<Event>) {
-        let (mlat, stats) = (&mut self.mlat, &mut self.stats);
-        self.grouper.advance(now, &mut |g: Group| Self::on_group(mlat, stats, &g, now, out));
+        let (mlat, fuser, stats, sync_inflation) =
+            (&mut self.mlat, &mut self.fuser, &mut self.stats, self.sync_inflation);
+        self.grouper
+            .advance(now, &mut |g: Group| Self::on_group(mlat, fuser, stats, sync_inflation, &g, now, out));
+        self.fuser.advance(now, &mut self.tracks_out);
+        out.extend(self.tracks_out.drain(..).map(|r| Event::Track(Box::new(r))));
     }
 
     /// End of input: everything pending is processed.
     pub fn finish(&mut self, out: &mut Vec<Event>) {
-        let (mlat, stats) = (&mut self.mlat, &mut self.stats);
+        let (mlat, fuser, stats, sync_inflation) =
+            (&mut self.mlat, &mut self.fuser, &mut self.stats, self.sync_inflation);
         self.grouper.flush(&mut |g: Group| {
             let now = g.first_arrival;
-            Self::on_group(mlat, stats, &g, now, out)
+            Self::on_group(mlat, fuser, stats, sync_inflation, &g, now, out)
         });
+        self.fuser.finish(&mut self.tracks_out);
+        out.extend(self.tracks_out.drain(..).map(|r| Event::Track(Box::new(r))));
     }
 
-    fn on_group(mlat: &mut Mlat, stats: &mut CoreStats, g: &Group, now: f64, out: &mut Vec<Event>) {
-        if let Some(fix) = mlat.on_group(g, now) {
-            stats.fixes += 1;
-            out.push(Event::Mlat(fix));
-        }
+    fn on_group(
+        mlat: &mut Mlat,
+        fuser: &mut Fuser,
+        stats: &mut CoreStats,
+        sync_inflation: f64,
+        g: &Group,
+        now: f64,
+        out: &mut Vec<Event>,
+    ) {
+        let Some(fix) = mlat.on_group(g, now) else {
+            return;
+        };
+        stats.fixes += 1;
+        let c = fix.cov_en;
+        // Synchronisation errors persist from fix to fix; a filter that took
+        // them as white would average them away and claim too much.
+        let inflation = 1.0 + fix.sync_share * (sync_inflation - 1.0);
+        let m = Measurement {
+            t: fix.t,
+            source: Source::Mlat,
+            obs: Observation::Position {
+                lat: fix.lat,
+                lon: fix.lon,
+                cov_en: nalgebra::Matrix2::new(c[0][0], c[0][1], c[1][0], c[1][1]) * inflation,
+                // Heights come from altitude reports: a fix's own height is
+                // either the barometric one it was given, or (without one)
+                // so poorly determined that its linearised sigma cannot be
+                // trusted (hundreds of metres off at 20 m sigma on the surface).
+                height: None,
+                time_sigma_s: 0.0,
+                surface: false,
+            },
+        };
+        let mut reports = Vec::new();
+        fuser.on_measurement(fix.addr, None, m, now, &mut reports);
+        out.push(Event::Mlat(fix));
+        out.extend(reports.into_iter().map(|r| Event::Track(Box::new(r))));
     }
 
     /// One frame from receiver `rx`, arrived at `arrival` (Unix s).
@@ -200,11 +274,11 @@ impl Core {
             return;
         }
         self.advance(arrival, out);
-        let (mlat, stats) = (&mut self.mlat, &mut self.stats);
-        match self
-            .grouper
-            .add(rx, arrival, frame, &mut |g: Group| Self::on_group(mlat, stats, &g, arrival, out))
-        {
+        let (mlat, fuser, stats, sync_inflation) =
+            (&mut self.mlat, &mut self.fuser, &mut self.stats, self.sync_inflation);
+        match self.grouper.add(rx, arrival, frame, &mut |g: Group| {
+            Self::on_group(mlat, fuser, stats, sync_inflation, &g, arrival, out)
+        }) {
             Added::New => {}
             Added::Joined => return,
             Added::Duplicate => {
@@ -244,9 +318,117 @@ impl Core {
             }
         }
         self.grouper.set_newest_info(info);
+        self.feed_tracker(rx, arrival, frame, &d, report.as_ref());
         if let Some(p) = report {
             self.stats.positions += 1;
             out.push(Event::Position(p));
+        }
+        out.extend(self.tracks_out.drain(..).map(|r| Event::Track(Box::new(r))));
+    }
+
+    /// Time of applicability of a frame: exact for GPS-timed receivers, the
+    /// arrival time otherwise.
+    fn frame_time(&self, rx: usize, arrival: f64, frame: &RawFrame) -> (f64, bool) {
+        match self.receivers[rx].decl.clock {
+            ClockKind::Gps if frame.has_timing() => (ClockKind::gps_unix(frame.timestamp, arrival), true),
+            _ => (arrival, false),
+        }
+    }
+
+    /// What a decoded frame tells the tracker: positions, velocities,
+    /// altitudes, and identity.
+    fn feed_tracker(
+        &mut self,
+        rx: usize,
+        arrival: f64,
+        frame: &RawFrame,
+        d: &crate::modes::Decoded,
+        report: Option<&PositionReport>,
+    ) {
+        if !d.trusted() {
+            return;
+        }
+        let addr = d.msg.addr;
+        let (t_frame, _) = self.frame_time(rx, arrival, frame);
+        let tcfg = self.time_sigma;
+        let baro_sigma_m = self.baro_sigma_m;
+        let out = &mut self.tracks_out;
+        if let Some(p) = report {
+            let Some(sigma) = p.sigma_m else {
+                self.stats.untracked_positions += 1;
+                return;
+            };
+            let time_sigma_s = if p.gps_timed { tcfg.0 } else { tcfg.1 };
+            let m = Measurement {
+                t: p.t,
+                source: Source::Adsb,
+                obs: Observation::Position {
+                    lat: p.lat,
+                    lon: p.lon,
+                    cov_en: nalgebra::Matrix2::identity() * sigma * sigma,
+                    height: p.alt_m.zip(p.alt_sigma_m.map(|s| s * s)),
+                    time_sigma_s,
+                    surface: p.surface,
+                },
+            };
+            self.fuser.on_measurement(addr, p.nac_p, m, arrival, out);
+            if let Some(a) = p.alt_baro_ft {
+                self.fuser.set_alt_baro(addr, a);
+            }
+            return;
+        }
+        let baro_height = |alt_ft: i32| {
+            let diff = d.gnss_baro_diff_ft;
+            let sigma = if diff.is_some() { 8.0 } else { baro_sigma_m };
+            ((alt_ft + diff.unwrap_or(0)) as f64 * FT_TO_M, sigma * sigma)
+        };
+        match d.msg.body {
+            Body::AirAir { alt_ft: Some(a), .. } | Body::Altitude { alt_ft: Some(a), .. } => {
+                let (h, var) = baro_height(a);
+                let m = Measurement { t: arrival, source: Source::Mlat, obs: Observation::Height { h, var } };
+                self.fuser.on_measurement(addr, None, m, arrival, out);
+                self.fuser.set_alt_baro(addr, a);
+            }
+            Body::Identity { squawk, .. } => self.fuser.set_squawk(addr, squawk),
+            Body::Extended(es) => match es.kind {
+                Es::Identification { callsign, .. } => {
+                    self.fuser.set_flight(addr, crate::modes::fields::callsign_str(&callsign).to_string())
+                }
+                Es::Emergency { squawk, .. } => self.fuser.set_squawk(addr, squawk),
+                Es::Velocity(v) => {
+                    let (Some(ve), Some(vn)) = (v.ve_kt, v.vn_kt) else {
+                        return;
+                    };
+                    // NACv: 95% bounds of horizontal (m/s) and vertical (ft/s) velocity error.
+                    let (h95, v95_fps) = match v.nac_v {
+                        4 => (0.3, 1.5),
+                        3 => (1.0, 5.0),
+                        2 => (3.0, 15.0),
+                        1 => (10.0, 50.0),
+                        _ => (30.0, 100.0),
+                    };
+                    // Plus the 1 kt (or 4 kt supersonic) and 64 ft/min resolution.
+                    let step = if v.subtype == 2 { 4.0 } else { 1.0 } * KT_TO_MS;
+                    let hv = (h95 / 2.448f64).powi(2) + step * step / 12.0;
+                    let climb = v.vrate_fpm.map(|r| {
+                        let s = v95_fps * FT_TO_M / 1.96;
+                        (r as f64 * FT_TO_M / 60.0, s * s + (64.0 * FT_TO_M / 60.0).powi(2) / 12.0)
+                    });
+                    let m = Measurement {
+                        t: t_frame,
+                        source: Source::Adsb,
+                        obs: Observation::Velocity {
+                            v_en: nalgebra::Vector2::new(ve * KT_TO_MS, vn * KT_TO_MS),
+                            cov: nalgebra::Matrix2::identity() * hv,
+                            climb,
+                        },
+                    };
+                    self.fuser.on_measurement(addr, None, m, arrival, out);
+                }
+                Es::AirbornePosition { alt_ft: Some(a), gnss: false, .. } => self.fuser.set_alt_baro(addr, a),
+                _ => {}
+            },
+            _ => {}
         }
     }
 
@@ -262,16 +444,18 @@ impl Core {
         let (Some(p), Body::Extended(es)) = (d.position.filter(|p| p.reliable), d.msg.body) else {
             return None;
         };
-        let t = match decl.clock {
-            ClockKind::Gps if frame.has_timing() => ClockKind::gps_unix(frame.timestamp, arrival),
-            _ => arrival,
-        };
-        let (alt_m, alt_baro_ft) = match es.kind {
-            Es::AirbornePosition { alt_ft: Some(a), gnss: true, .. } => (Some(a as f64 * FT_TO_M), None),
-            Es::AirbornePosition { alt_ft: Some(a), gnss: false, .. } => {
-                (Some((a + d.gnss_baro_diff_ft.unwrap_or(0)) as f64 * FT_TO_M), Some(a))
+        let _ = decl;
+        let (t, gps_timed) = self.frame_time(rx, arrival, frame);
+        let (alt_m, alt_baro_ft, alt_sigma_m) = match es.kind {
+            Es::AirbornePosition { alt_ft: Some(a), gnss: true, .. } => {
+                (Some(a as f64 * FT_TO_M), None, Some(15.0))
             }
-            _ => (None, None),
+            Es::AirbornePosition { alt_ft: Some(a), gnss: false, .. } => (
+                Some((a + d.gnss_baro_diff_ft.unwrap_or(0)) as f64 * FT_TO_M),
+                Some(a),
+                Some(if d.gnss_baro_diff_ft.is_some() { 8.0 } else { self.baro_sigma_m }),
+            ),
+            _ => (None, None, None),
         };
         // EPU is a 95% radius: per-axis sigma = EPU / 2.448. Version 0 reports
         // NUCp, whose 95% accuracy bound is about half its protection limit.
@@ -286,8 +470,10 @@ impl Core {
             lon: p.lon,
             alt_m,
             alt_baro_ft,
+            alt_sigma_m,
             nac_p: d.nac_p,
             sigma_m: epu.map(|e| e / 2.448),
+            gps_timed,
             surface: p.surface,
             rx,
         })

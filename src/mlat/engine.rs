@@ -19,7 +19,7 @@ use super::sync::{ClockSync, LocalCopy};
 use crate::feed::capture::{ClockKind, ReceiverDecl};
 use crate::geo::{ecef_distance, geodetic_to_ecef, FT_TO_M};
 
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MlatConfig {
     /// Receivers closer than this (m) count as one.
@@ -94,6 +94,9 @@ pub struct MlatFix {
     pub chi2: f64,
     pub dof: usize,
     pub altitude_used: bool,
+    /// Share of the timing variance that came from clock synchronisation
+    /// (0 for GPS-timed groups): errors that persist from fix to fix.
+    pub sync_share: f64,
     pub df: u8,
 }
 
@@ -394,8 +397,11 @@ impl Mlat {
         // variance) into one measurement with a smaller sigma.
         let mut ms: Vec<Measurement> = Vec::with_capacity(copies.len());
         let mut sites: Vec<Vec<usize>> = Vec::with_capacity(copies.len());
+        let (mut sync_var, mut all_var) = (0.0, 0.0);
         for (c, t) in copies.iter().zip(&times) {
             let Some((t, var)) = t else { continue };
+            sync_var += var;
+            all_var += var + self.rxs[c.rx].sigma().powi(2);
             let rx = &self.rxs[c.rx];
             let m =
                 Measurement { pos: rx.ecef, t: *t - rx.bias(), sigma_t: (rx.sigma().powi(2) + var).sqrt() };
@@ -469,6 +475,7 @@ impl Mlat {
             chi2: if fix.dof > 0 { fix.chi2 / fix.dof as f64 } else { 0.0 },
             dof: fix.dof,
             altitude_used: alt.is_some(),
+            sync_share: if all_var > 0.0 { sync_var / all_var } else { 0.0 },
             df: info.df,
         })
     }

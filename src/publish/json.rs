@@ -4,6 +4,7 @@
 use serde::Serialize;
 
 use crate::core::{Event, PositionReport};
+use crate::fuse::TrackReport;
 use crate::mlat::MlatFix;
 
 #[derive(Serialize)]
@@ -43,6 +44,58 @@ struct PositionRecord<'a> {
     receiver: &'a str,
 }
 
+#[derive(Serialize)]
+pub struct TrackRecord {
+    #[serde(rename = "type")]
+    kind: &'static str,
+    id: u64,
+    hex: String,
+    t: f64,
+    lat: f64,
+    lon: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    alt_m: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    alt_baro_ft: Option<i32>,
+    vel_enu: [f64; 3],
+    cov_en: [[f64; 2]; 2],
+    source: &'static str,
+    sources: Vec<&'static str>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    nac_p: Option<u8>,
+    period_s: f64,
+    motion: &'static str,
+    adsb_suspect: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    flight: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    squawk: Option<String>,
+}
+
+pub fn track_record(r: &TrackReport) -> TrackRecord {
+    let e = &r.est;
+    TrackRecord {
+        kind: "track",
+        id: r.id,
+        hex: format!("{:06X}", r.addr),
+        t: round(e.t, 1e6),
+        lat: round(e.lat, 1e8),
+        lon: round(e.lon, 1e8),
+        alt_m: e.alt_m.map(|a| round(a, 100.0)),
+        alt_baro_ft: r.alt_baro_ft,
+        vel_enu: e.vel_enu.map(|v| round(v, 1e3)),
+        cov_en: e.cov_en().map(|row| row.map(|v| round(v, 1e3))),
+        source: r.source,
+        sources: r.sources.clone(),
+        nac_p: r.nac_p,
+        period_s: r.period_s,
+        motion: r.motion.name(),
+        adsb_suspect: r.adsb_suspect,
+        flight: r.flight.clone().filter(|f| !f.is_empty()),
+        squawk: r.squawk.map(|s| format!("{s:04X}")),
+    }
+}
+
 /// Writes one event as a JSON line; `receiver_id` names receivers by index.
 pub fn write_event<'a>(
     out: &mut impl std::io::Write,
@@ -55,6 +108,9 @@ pub fn write_event<'a>(
         }
         Event::Mlat(f) => {
             serde_json::to_writer(&mut *out, &mlat_record(f, &receiver_id))?;
+        }
+        Event::Track(r) => {
+            serde_json::to_writer(&mut *out, &track_record(r))?;
         }
     }
     out.write_all(b"\n")

@@ -1,0 +1,463 @@
+//! Fusion stage: per aircraft, an ADS-B track, an MLAT track and a fused
+//! track, and when to publish them.
+//!
+//! The fused track is produced by the configured [`Method`]: `measurement`
+//! feeds one IMM with both kinds of measurement; the others combine the two
+//! single-source tracks at a common time ([`methods`]). Publication follows
+//! the track's sampling period (NACp table, densest while in conflict); a
+//! track that MLAT feeds is held for the MLAT wait so the fix of the same
+//! transmission is in it, ADS-B-only tracks go out at once.
+//!
+//! Measurements are checked before any filter sees them (non-finite values,
+//! speeds beyond 1,200 m/s, times far from now): rejected and counted.
+
+pub mod methods;
+
+use std::collections::{HashMap, VecDeque};
+use std::sync::Arc;
+
+use nalgebra::{Matrix2, Vector2};
+use serde::Deserialize;
+
+use crate::track::imm::ImmSpec;
+use crate::track::motion::{Fix2, Motion, MotionTest};
+use crate::track::plane::Plane;
+use crate::track::{Estimate, Measurement, Observation, Outcome, Source, Stage, Track, TrackConfig};
+pub use methods::{Cross, Method};
+
+#[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct FuseConfig {
+    /// How the fused track is made: measurement, information, convex, ci, reweighted.
+    pub method: Method,
+    /// How long a track fed by MLAT is held before publishing, so the fix of
+    /// the same transmission is in it (s); about the core's group wait.
+    pub mlat_hold_s: f64,
+    /// A source fed a track "lately" within this time (s): `sources`.
+    pub sources_window_s: f64,
+    /// Measurements more than this far from the present are rejected (s).
+    pub max_time_error_s: f64,
+}
+
+impl Default for FuseConfig {
+    fn default() -> Self {
+        FuseConfig {
+            method: Method::Measurement,
+            mlat_hold_s: 0.6,
+            sources_window_s: 10.0,
+            max_time_error_s: 10.0,
+        }
+    }
+}
+
+impl FuseConfig {
+    pub fn validate(&self) -> Result<(), String> {
+        let mut errs = Vec::new();
+        for (name, v) in [
+            ("mlat_hold_s", self.mlat_hold_s),
+            ("sources_window_s", self.sources_window_s),
+            ("max_time_error_s", self.max_time_error_s),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                errs.push(format!("{name} = {v} must be zero or positive"));
+            }
+        }
+        if errs.is_empty() {
+            Ok(())
+        } else {
+            Err(errs.join("\n"))
+        }
+    }
+}
+
+/// A published track state (contract `type: "track"`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrackReport {
+    pub id: u64,
+    pub addr: u32,
+    pub source: &'static str,
+    pub est: Estimate,
+    pub alt_baro_ft: Option<i32>,
+    pub sources: Vec<&'static str>,
+    pub nac_p: Option<u8>,
+    pub period_s: f64,
+    pub motion: Motion,
+    pub adsb_suspect: bool,
+    pub flight: Option<String>,
+    pub squawk: Option<u16>,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FuseStats {
+    pub measurements: u64,
+    pub rejected_non_finite: u64,
+    pub rejected_speed: u64,
+    pub rejected_time: u64,
+    pub too_late: u64,
+    pub gated: u64,
+    pub restarts: u64,
+    pub table_full: u64,
+    pub tracks_created: u64,
+    pub tracks_dropped: u64,
+    pub published: u64,
+    /// Fusion of two tracks impossible (covariance, time): the better single track published.
+    pub fusion_fallbacks: u64,
+}
+
+/// Speed no aircraft reaches (m/s).
+pub const MAX_SPEED_MPS: f64 = 1_200.0;
+
+struct Aircraft {
+    id: u64,
+    fused: Track,
+    single: [Track; 2],
+    /// Data time of the newest measurement from each source.
+    last_source_t: [f64; 2],
+    /// Arrival time the aircraft was last heard.
+    last_heard: f64,
+    next_due: f64,
+    /// Time of applicability waiting to be published.
+    pending: Option<f64>,
+    nac_p: Option<u8>,
+    alt_baro_ft: Option<i32>,
+    flight: Option<String>,
+    squawk: Option<u16>,
+    motion: MotionTest,
+    motion_plane: Option<Plane>,
+    motion_state: Motion,
+    motion_t: f64,
+    in_conflict: bool,
+    adsb_suspect: bool,
+    surface: bool,
+    cross: Cross,
+}
+
+pub struct Fuser {
+    cfg: FuseConfig,
+    tcfg: Arc<TrackConfig>,
+    spec: Arc<ImmSpec>,
+    aircraft: HashMap<u32, Aircraft>,
+    /// (release time, addr): held publications in release order.
+    held: VecDeque<(f64, u32)>,
+    next_id: u64,
+    next_sweep: f64,
+    pub publish_source_tracks: bool,
+    stats: FuseStats,
+}
+
+impl Fuser {
+    pub fn new(cfg: FuseConfig, tcfg: TrackConfig, publish_source_tracks: bool) -> Fuser {
+        let spec = tcfg.imm_spec();
+        Fuser {
+            cfg,
+            tcfg: Arc::new(tcfg),
+            spec,
+            aircraft: HashMap::new(),
+            held: VecDeque::new(),
+            next_id: 1,
+            next_sweep: f64::NEG_INFINITY,
+            publish_source_tracks,
+            stats: FuseStats::default(),
+        }
+    }
+
+    pub fn stats(&self) -> &FuseStats {
+        &self.stats
+    }
+
+    pub fn tracks(&self) -> usize {
+        self.aircraft.len()
+    }
+
+    /// Identity and state from messages that carry no position.
+    pub fn set_flight(&mut self, addr: u32, flight: String) {
+        if let Some(a) = self.aircraft.get_mut(&addr) {
+            a.flight = Some(flight);
+        }
+    }
+
+    pub fn set_squawk(&mut self, addr: u32, squawk: u16) {
+        if let Some(a) = self.aircraft.get_mut(&addr) {
+            a.squawk = Some(squawk);
+        }
+    }
+
+    pub fn set_alt_baro(&mut self, addr: u32, alt_ft: i32) {
+        if let Some(a) = self.aircraft.get_mut(&addr) {
+            a.alt_baro_ft = Some(alt_ft);
+        }
+    }
+
+    fn valid(&mut self, m: &Measurement, now: f64) -> bool {
+        let finite = m.t.is_finite()
+            && match m.obs {
+                Observation::Position { lat, lon, cov_en, height, time_sigma_s, .. } => {
+                    lat.is_finite()
+                        && lon.is_finite()
+                        && lat.abs() <= 90.0
+                        && cov_en.iter().all(|v| v.is_finite())
+                        && cov_en.cholesky().is_some()
+                        && height.is_none_or(|(h, v)| h.is_finite() && v > 0.0 && v.is_finite())
+                        && time_sigma_s.is_finite()
+                }
+                Observation::Velocity { v_en, cov, climb } => {
+                    v_en.iter().all(|v| v.is_finite())
+                        && cov.cholesky().is_some()
+                        && climb.is_none_or(|(c, v)| c.is_finite() && v > 0.0 && v.is_finite())
+                }
+                Observation::Height { h, var } => h.is_finite() && var > 0.0 && var.is_finite(),
+            };
+        if !finite {
+            self.stats.rejected_non_finite += 1;
+            return false;
+        }
+        if (m.t - now).abs() > self.cfg.max_time_error_s {
+            self.stats.rejected_time += 1;
+            return false;
+        }
+        if let Observation::Velocity { v_en, .. } = m.obs {
+            if v_en.norm() > MAX_SPEED_MPS {
+                self.stats.rejected_speed += 1;
+                return false;
+            }
+        }
+        true
+    }
+
+    /// A measurement of aircraft `addr`, at arrival time `now`.
+    pub fn on_measurement(
+        &mut self,
+        addr: u32,
+        nac_p: Option<u8>,
+        m: Measurement,
+        now: f64,
+        out: &mut Vec<TrackReport>,
+    ) {
+        self.stats.measurements += 1;
+        if !self.valid(&m, now) {
+            return;
+        }
+        if !self.aircraft.contains_key(&addr) {
+            if self.aircraft.len() >= self.tcfg.max_tracks {
+                self.stats.table_full += 1;
+                return;
+            }
+            let track = Track::new(self.tcfg.clone(), self.spec.clone());
+            let mut single = track.clone();
+            single.keep_gain = self.cfg.method == Method::Information;
+            self.stats.tracks_created += 1;
+            self.aircraft.insert(
+                addr,
+                Aircraft {
+                    id: self.next_id,
+                    fused: track.clone(),
+                    single: [single.clone(), single],
+                    last_source_t: [f64::NEG_INFINITY; 2],
+                    last_heard: now,
+                    next_due: f64::NEG_INFINITY,
+                    pending: None,
+                    nac_p: None,
+                    alt_baro_ft: None,
+                    flight: None,
+                    squawk: None,
+                    motion: MotionTest::new(self.tcfg.motion_window, self.tcfg.motion_false_alarm),
+                    motion_plane: None,
+                    motion_state: Motion::Unknown,
+                    motion_t: f64::NEG_INFINITY,
+                    in_conflict: false,
+                    adsb_suspect: false,
+                    surface: false,
+                    cross: Cross::new(),
+                },
+            );
+            self.next_id += 1;
+        }
+        let a = self.aircraft.get_mut(&addr).expect("inserted");
+        a.last_heard = now;
+        if nac_p.is_some() && m.source == Source::Adsb {
+            a.nac_p = nac_p;
+        }
+        // A flagged aircraft's ADS-B stays out of the fused track.
+        let into_fused = !(a.adsb_suspect && m.source == Source::Adsb);
+        let outcome = if into_fused { a.fused.apply(m) } else { Outcome::Gated };
+        let single = a.single[m.source as usize].apply(m);
+        if a.single[0].keep_gain {
+            let model = self.spec.models[0];
+            let f_q = |dt: f64| model.transition(dt);
+            match (single, a.single[m.source as usize].gain) {
+                (Outcome::Restarted, _) => a.cross = Cross::new(),
+                (Outcome::Applied { .. }, Some((t, g))) if t == m.t => {
+                    a.cross.update(t, m.source == Source::Adsb, &g, f_q)
+                }
+                _ => {}
+            }
+        }
+        match outcome {
+            Outcome::TooLate => self.stats.too_late += 1,
+            Outcome::Gated => self.stats.gated += 1,
+            Outcome::Restarted => self.stats.restarts += 1,
+            _ => {}
+        }
+        let Observation::Position { lat, lon, cov_en, .. } = m.obs else {
+            return;
+        };
+        if matches!(single, Outcome::Applied { .. } | Outcome::Restarted) {
+            a.last_source_t[m.source as usize] = a.last_source_t[m.source as usize].max(m.t);
+        }
+        if let Observation::Position { surface, .. } = m.obs {
+            a.surface = surface;
+        }
+        if m.t - a.motion_t >= self.tcfg.motion_interval_s {
+            a.motion_t = m.t;
+            Self::motion(a, lat, lon, cov_en);
+        }
+        if !matches!(outcome, Outcome::Applied { .. })
+            || a.fused.stage != Stage::Confirmed
+            || m.t < a.next_due
+        {
+            return;
+        }
+        let period = a.period_s(&self.tcfg);
+        if !a.next_due.is_finite() {
+            a.next_due = m.t;
+        }
+        while a.next_due <= m.t {
+            a.next_due += period;
+        }
+        let mlat_fed = m.t - a.last_source_t[Source::Mlat as usize] < self.cfg.sources_window_s;
+        if mlat_fed && self.cfg.mlat_hold_s > 0.0 {
+            if a.pending.is_none() {
+                self.held.push_back((now + self.cfg.mlat_hold_s, addr));
+            }
+            a.pending = Some(a.pending.map_or(m.t, |p: f64| p.max(m.t)));
+        } else {
+            a.pending = Some(m.t);
+            self.publish(addr, out);
+        }
+    }
+
+    /// The static/moving test over the aircraft's recent position
+    /// measurements; an airborne aircraft faster than a taxiing one moves
+    /// without the test (which costs a small matrix factorisation).
+    fn motion(a: &mut Aircraft, lat: f64, lon: f64, cov: Matrix2<f64>) {
+        if !a.surface && a.fused.speed().is_some_and(|v| v > 30.0) {
+            a.motion_state = Motion::Moving;
+            return;
+        }
+        let plane = match a.motion_plane {
+            Some(p) if crate::geo::distance_m(p.lat, p.lon, lat, lon) < 5_000.0 => p,
+            _ => {
+                let p = Plane::new(lat, lon, 0.0);
+                a.motion_plane = Some(p);
+                a.motion = MotionTest::new(a.motion.window_len(), a.motion.false_alarm());
+                p
+            }
+        };
+        let en = plane.to_en(lat, lon);
+        a.motion_state = a.motion.push(Fix2 { pos: Vector2::new(en[0], en[1]), cov });
+    }
+
+    /// Moves time to `now`: held publications whose wait is over go out, and
+    /// aircraft not heard for the drop time are forgotten.
+    pub fn advance(&mut self, now: f64, out: &mut Vec<TrackReport>) {
+        while let Some(&(release, addr)) = self.held.front() {
+            if release > now {
+                break;
+            }
+            self.held.pop_front();
+            self.publish(addr, out);
+        }
+        if now >= self.next_sweep {
+            self.next_sweep = now + 1.0;
+            let drop = self.tcfg.drop_after_s;
+            let before = self.aircraft.len();
+            self.aircraft.retain(|_, a| now - a.last_heard <= drop);
+            self.stats.tracks_dropped += (before - self.aircraft.len()) as u64;
+        }
+    }
+
+    /// Everything held goes out (end of input).
+    pub fn finish(&mut self, out: &mut Vec<TrackReport>) {
+        while let Some((_, addr)) = self.held.pop_front() {
+            self.publish(addr, out);
+        }
+    }
+
+    fn publish(&mut self, addr: u32, out: &mut Vec<TrackReport>) {
+        let Some(a) = self.aircraft.get_mut(&addr) else {
+            return;
+        };
+        let Some(t) = a.pending.take() else {
+            return;
+        };
+        let period = a.period_s(&self.tcfg);
+        let window = self.cfg.sources_window_s;
+        let sources: Vec<&'static str> = [Source::Adsb, Source::Mlat]
+            .into_iter()
+            .filter(|s| t - a.last_source_t[*s as usize] <= window)
+            .map(Source::name)
+            .collect();
+        // A coasting single-source track (no position lately) is not fused.
+        let coast = self.tcfg.coast_after_s;
+        let single = |s: Source| {
+            (t - a.last_source_t[s as usize] <= coast && a.single[s as usize].stage == Stage::Confirmed)
+                .then(|| a.single[s as usize].estimate_at(t))
+                .flatten()
+        };
+        let (adsb, mlat) = (single(Source::Adsb), single(Source::Mlat));
+        let fused = match self.cfg.method {
+            Method::Measurement => a.fused.estimate_at(t),
+            method => match (adsb.filter(|_| !a.adsb_suspect), mlat) {
+                (Some(x), Some(y)) => match methods::fuse(
+                    method,
+                    &x,
+                    &y,
+                    Some(&a.cross.at(t, |dt| self.spec.models[0].transition(dt))),
+                ) {
+                    Some(f) => Some(f),
+                    None => {
+                        self.stats.fusion_fallbacks += 1;
+                        Some(methods::better(&x, &y))
+                    }
+                },
+                (x, y) => x.or(y),
+            },
+        };
+        let report = |source: &'static str, est: Estimate, sources: Vec<&'static str>| TrackReport {
+            id: a.id,
+            addr,
+            source,
+            est,
+            alt_baro_ft: a.alt_baro_ft,
+            sources,
+            nac_p: a.nac_p,
+            period_s: period,
+            motion: a.motion_state,
+            adsb_suspect: a.adsb_suspect,
+            flight: a.flight.clone(),
+            squawk: a.squawk,
+        };
+        if let Some(est) = fused {
+            out.push(report("fused", est, sources));
+            self.stats.published += 1;
+        }
+        if self.publish_source_tracks {
+            for (s, est) in [(Source::Adsb, adsb), (Source::Mlat, mlat)] {
+                if let Some(est) = est {
+                    out.push(report(s.name(), est, vec![s.name()]));
+                }
+            }
+        }
+    }
+}
+
+impl Aircraft {
+    /// The sampling period in force: the NACp table's, the densest in conflict.
+    fn period_s(&self, cfg: &TrackConfig) -> f64 {
+        if self.in_conflict {
+            cfg.densest_period_s()
+        } else {
+            cfg.period_s(self.nac_p)
+        }
+    }
+}
