@@ -47,11 +47,19 @@ enum Command {
         source_tracks: bool,
     },
     /// Accuracy of a track stream against the truth of a simulation.
+    /// With --seeds N and --scenario (no --truth/--tracks): a Monte Carlo
+    /// table of every fusion method over N simulations of the scenario.
     Eval {
-        #[arg(long)]
-        truth: PathBuf,
-        #[arg(long)]
-        tracks: PathBuf,
+        #[arg(long, required_unless_present = "seeds")]
+        truth: Option<PathBuf>,
+        #[arg(long, required_unless_present = "seeds")]
+        tracks: Option<PathBuf>,
+        /// Monte Carlo: simulate the scenario under seeds 1..=N.
+        #[arg(long, requires = "scenario")]
+        seeds: Option<u64>,
+        /// Configuration for the Monte Carlo runs.
+        #[arg(long, requires = "seeds")]
+        config: Option<PathBuf>,
         /// The simulated scenario: MLAT fixes are then also compared with the
         /// Cramér-Rao bound of their geometry.
         #[arg(long)]
@@ -83,9 +91,11 @@ fn main() -> ExitCode {
             cmd::run::run(cmd::run::RunArgs { config, capture, output, source_tracks })
         }
         Command::Sim { scenario, out } => cmd::sim::run(&scenario, &out),
-        Command::Eval { truth, tracks, scenario, json } => {
-            cmd::eval::run(&truth, &tracks, scenario.as_deref(), json)
-        }
+        Command::Eval { truth, tracks, scenario, seeds, config, json } => match (seeds, truth, tracks) {
+            (Some(n), _, _) => cmd::eval::monte_carlo(scenario.as_deref(), n, config.as_deref(), json),
+            (None, Some(truth), Some(tracks)) => cmd::eval::run(&truth, &tracks, scenario.as_deref(), json),
+            _ => Err(anyhow::anyhow!("eval needs --truth and --tracks, or --scenario and --seeds")),
+        },
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -23,3 +23,20 @@ pub fn run(truth: &Path, tracks: &Path, scenario: Option<&Path>, json: bool) -> 
     let text = if json { serde_json::to_string_pretty(&report)? + "\n" } else { report.to_string() };
     super::print_stdout(&text)
 }
+
+/// `eval --scenario FILE --seeds N [--config FILE]`: every fusion method over N seeds.
+pub fn monte_carlo(scenario: Option<&Path>, seeds: u64, config: Option<&Path>, json: bool) -> Result<()> {
+    let scenario = Scenario::load(scenario.context("--seeds needs --scenario")?)?;
+    let cfg = match config {
+        Some(p) => crate::config::Config::load(p)?,
+        None => crate::config::Config::default(),
+    };
+    let rows =
+        crate::eval::montecarlo::monte_carlo(&scenario, &cfg.core, &crate::fuse::Method::ALL, 1..seeds + 1)?;
+    let text = if json {
+        serde_json::to_string_pretty(&rows)? + "\n"
+    } else {
+        crate::eval::montecarlo::table(&rows)
+    };
+    super::print_stdout(&text)
+}

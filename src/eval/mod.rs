@@ -7,6 +7,8 @@
 //! (fused, adsb, mlat), `mlat` fixes, and `position` records (decoded ADS-B
 //! reports before tracking) as `adsb-report`.
 
+pub mod montecarlo;
+
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::io::BufRead;
 
