@@ -14,7 +14,7 @@ use serde::Deserialize;
 
 use crate::feed::capture::{ClockKind, ReceiverDecl};
 use crate::feed::RawFrame;
-use crate::fuse::{FuseConfig, Fuser, TrackReport};
+use crate::fuse::{Alert, FuseConfig, Fuser, Output, TrackReport};
 use crate::geo::geodetic_to_ecef;
 use crate::geo::{FT_TO_M, KT_TO_MS};
 use crate::mlat::group::{Added, Group, GroupInfo, Grouper};
@@ -106,6 +106,14 @@ pub enum Event {
     Position(PositionReport),
     Mlat(MlatFix),
     Track(Box<TrackReport>),
+    Alert(Alert),
+}
+
+fn event(o: Output) -> Event {
+    match o {
+        Output::Track(r) => Event::Track(r),
+        Output::Alert(a) => Event::Alert(a),
+    }
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -133,7 +141,7 @@ pub struct Core {
     grouper: Grouper,
     mlat: Mlat,
     fuser: Fuser,
-    tracks_out: Vec<TrackReport>,
+    tracks_out: Vec<Output>,
     stats: CoreStats,
     min_sync_nacp: u8,
     baro_sigma_m: f64,
@@ -203,7 +211,7 @@ impl Core {
         self.grouper
             .advance(now, &mut |g: Group| Self::on_group(mlat, fuser, stats, sync_inflation, &g, now, out));
         self.fuser.advance(now, &mut self.tracks_out);
-        out.extend(self.tracks_out.drain(..).map(|r| Event::Track(Box::new(r))));
+        out.extend(self.tracks_out.drain(..).map(event));
     }
 
     /// End of input: everything pending is processed.
@@ -215,7 +223,7 @@ impl Core {
             Self::on_group(mlat, fuser, stats, sync_inflation, &g, now, out)
         });
         self.fuser.finish(&mut self.tracks_out);
-        out.extend(self.tracks_out.drain(..).map(|r| Event::Track(Box::new(r))));
+        out.extend(self.tracks_out.drain(..).map(event));
     }
 
     fn on_group(
@@ -252,9 +260,20 @@ impl Core {
             },
         };
         let mut reports = Vec::new();
+        if let Some((lat, lon, sigma)) = g.info.report {
+            // The same transmission's ADS-B position against its fix.
+            let p = crate::track::plane::Plane::new(lat, lon, 0.0);
+            let d = p.to_en(fix.lat, fix.lon);
+            let v = sigma * sigma;
+            let s = [
+                [v + c[0][0] * inflation, c[0][1] * inflation],
+                [c[1][0] * inflation, v + c[1][1] * inflation],
+            ];
+            fuser.on_conformance(fix.addr, fix.t, d, s, &mut reports);
+        }
         fuser.on_measurement(fix.addr, None, m, now, &mut reports);
         out.push(Event::Mlat(fix));
-        out.extend(reports.into_iter().map(|r| Event::Track(Box::new(r))));
+        out.extend(reports.into_iter().map(event));
     }
 
     /// One frame from receiver `rx`, arrived at `arrival` (Unix s).
@@ -308,6 +327,8 @@ impl Core {
             _ => {}
         }
         let report = self.position_report(rx, arrival, frame, &d);
+        info.suspect = self.fuser.is_suspect(d.msg.addr);
+        info.report = report.as_ref().and_then(|p| Some((p.lat, p.lon, p.sigma_m?)));
         if let Some(p) = &report {
             // This transmission's own position: a clock synchronisation source.
             if let (Some(alt), Some(sigma), false) = (p.alt_m, p.sigma_m, p.surface) {
@@ -323,7 +344,7 @@ impl Core {
             self.stats.positions += 1;
             out.push(Event::Position(p));
         }
-        out.extend(self.tracks_out.drain(..).map(|r| Event::Track(Box::new(r))));
+        out.extend(self.tracks_out.drain(..).map(event));
     }
 
     /// Time of applicability of a frame: exact for GPS-timed receivers, the

@@ -11,6 +11,8 @@
 //! Measurements are checked before any filter sees them (non-finite values,
 //! speeds beyond 1,200 m/s, times far from now): rejected and counted.
 
+pub mod conflict;
+pub mod conformance;
 pub mod methods;
 
 use std::collections::{HashMap, VecDeque};
@@ -23,6 +25,8 @@ use crate::track::imm::ImmSpec;
 use crate::track::motion::{Fix2, Motion, MotionTest};
 use crate::track::plane::Plane;
 use crate::track::{Estimate, Measurement, Observation, Outcome, Source, Stage, Track, TrackConfig};
+pub use conflict::ConflictConfig;
+pub use conformance::ConformanceConfig;
 pub use methods::{Cross, Method};
 
 #[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
@@ -37,6 +41,8 @@ pub struct FuseConfig {
     pub sources_window_s: f64,
     /// Measurements more than this far from the present are rejected (s).
     pub max_time_error_s: f64,
+    pub conformance: ConformanceConfig,
+    pub conflict: ConflictConfig,
 }
 
 impl Default for FuseConfig {
@@ -46,6 +52,8 @@ impl Default for FuseConfig {
             mlat_hold_s: 0.6,
             sources_window_s: 10.0,
             max_time_error_s: 10.0,
+            conformance: ConformanceConfig::default(),
+            conflict: ConflictConfig::default(),
         }
     }
 }
@@ -62,12 +70,34 @@ impl FuseConfig {
                 errs.push(format!("{name} = {v} must be zero or positive"));
             }
         }
+        if let Err(e) = self.conformance.validate() {
+            errs.push(format!("[conformance] {e}"));
+        }
+        if let Err(e) = self.conflict.validate() {
+            errs.push(format!("[conflict] {e}"));
+        }
         if errs.is_empty() {
             Ok(())
         } else {
             Err(errs.join("\n"))
         }
     }
+}
+
+/// What the fusion stage emits.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Output {
+    Track(Box<TrackReport>),
+    Alert(Alert),
+}
+
+/// A change worth telling subscribers (contract `type: "alert"`).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Alert {
+    /// The timing contradicts (or again confirms) an aircraft's ADS-B positions.
+    AdsbSuspect { t: f64, addr: u32, id: u64, suspect: bool, offset_m: f64, nis: f64 },
+    /// A predicted conflict starts (or ends) between two tracks.
+    Conflict { t: f64, pair: [(u32, u64); 2], active: bool, tau_s: f64, t_cpa_s: f64, miss_m: f64, dz_m: f64 },
 }
 
 /// A published track state (contract `type: "track"`).
@@ -102,6 +132,12 @@ pub struct FuseStats {
     pub published: u64,
     /// Fusion of two tracks impossible (covariance, time): the better single track published.
     pub fusion_fallbacks: u64,
+    /// ADS-B/MLAT pairs judged by the conformance monitor, and flags raised.
+    pub conformance_checks: u64,
+    pub suspect_flags: u64,
+    /// ADS-B measurements of flagged aircraft kept out of their fused track.
+    pub suspect_excluded: u64,
+    pub conflicts: u64,
 }
 
 /// Speed no aircraft reaches (m/s).
@@ -128,6 +164,7 @@ struct Aircraft {
     motion_t: f64,
     in_conflict: bool,
     adsb_suspect: bool,
+    monitor: conformance::Monitor,
     surface: bool,
     cross: Cross,
 }
@@ -141,6 +178,8 @@ pub struct Fuser {
     held: VecDeque<(f64, u32)>,
     next_id: u64,
     next_sweep: f64,
+    next_conflict: f64,
+    conflicts: HashMap<(u32, u32), conflict::Conflict>,
     pub publish_source_tracks: bool,
     stats: FuseStats,
 }
@@ -156,6 +195,8 @@ impl Fuser {
             held: VecDeque::new(),
             next_id: 1,
             next_sweep: f64::NEG_INFINITY,
+            next_conflict: f64::NEG_INFINITY,
+            conflicts: HashMap::new(),
             publish_source_tracks,
             stats: FuseStats::default(),
         }
@@ -231,7 +272,7 @@ impl Fuser {
         nac_p: Option<u8>,
         m: Measurement,
         now: f64,
-        out: &mut Vec<TrackReport>,
+        out: &mut Vec<Output>,
     ) {
         self.stats.measurements += 1;
         if !self.valid(&m, now) {
@@ -266,6 +307,7 @@ impl Fuser {
                     motion_t: f64::NEG_INFINITY,
                     in_conflict: false,
                     adsb_suspect: false,
+                    monitor: Default::default(),
                     surface: false,
                     cross: Cross::new(),
                 },
@@ -279,7 +321,12 @@ impl Fuser {
         }
         // A flagged aircraft's ADS-B stays out of the fused track.
         let into_fused = !(a.adsb_suspect && m.source == Source::Adsb);
-        let outcome = if into_fused { a.fused.apply(m) } else { Outcome::Gated };
+        let outcome = if into_fused {
+            a.fused.apply(m)
+        } else {
+            self.stats.suspect_excluded += 1;
+            Outcome::Early
+        };
         let single = a.single[m.source as usize].apply(m);
         if a.single[0].keep_gain {
             let model = self.spec.models[0];
@@ -357,15 +404,120 @@ impl Fuser {
         a.motion_state = a.motion.push(Fix2 { pos: Vector2::new(en[0], en[1]), cov });
     }
 
+    /// Whether the conformance monitor distrusts an aircraft's ADS-B.
+    pub fn is_suspect(&self, addr: u32) -> bool {
+        self.aircraft.get(&addr).is_some_and(|a| a.adsb_suspect)
+    }
+
+    /// An ADS-B position and the MLAT fix of the same transmission: east/north
+    /// difference (m, fix minus report) and the sum of their covariances.
+    pub fn on_conformance(
+        &mut self,
+        addr: u32,
+        t: f64,
+        d: [f64; 2],
+        s: [[f64; 2]; 2],
+        out: &mut Vec<Output>,
+    ) {
+        let Some(a) = self.aircraft.get_mut(&addr) else {
+            return;
+        };
+        self.stats.conformance_checks += 1;
+        if let Some(suspect) = a.monitor.push(&self.cfg.conformance, d, s) {
+            a.adsb_suspect = suspect;
+            self.stats.suspect_flags += suspect as u64;
+            if suspect {
+                tracing::warn!(
+                    hex = format!("{addr:06X}"),
+                    offset_m = a.monitor.last_offset_m,
+                    "ADS-B position contradicted by timing"
+                );
+            }
+            out.push(Output::Alert(Alert::AdsbSuspect {
+                t,
+                addr,
+                id: a.id,
+                suspect,
+                offset_m: a.monitor.last_offset_m,
+                nis: a.monitor.last_nis,
+            }));
+        }
+    }
+
+    /// Pairs of confirmed tracks in predicted conflict; alerts on changes.
+    fn conflicts(&mut self, now: f64, out: &mut Vec<Output>) {
+        // In address order: the frame's origin (and so every figure) must
+        // not depend on the hash map's order, or runs would differ.
+        let mut addrs: Vec<u32> = self.aircraft.keys().copied().collect();
+        addrs.sort_unstable();
+        let mut origin: Option<Plane> = None;
+        let mut kin = Vec::new();
+        for addr in addrs {
+            let a = &self.aircraft[&addr];
+            if a.fused.stage != Stage::Confirmed || now - a.fused.last_position_t > self.tcfg.coast_after_s {
+                continue;
+            }
+            let Some(e) = a.fused.estimate_at(now.max(a.fused.t())) else {
+                continue;
+            };
+            let Some(alt) = e.alt_m else {
+                continue;
+            };
+            let plane = *origin.get_or_insert_with(|| Plane::new(e.lat, e.lon, 0.0));
+            let en = plane.to_en(e.lat, e.lon);
+            let alt_ft = a.alt_baro_ft.map_or(alt / crate::geo::FT_TO_M, f64::from);
+            kin.push(conflict::Kinematics { addr, pos: [en[0], en[1], alt], vel: e.vel_enu, alt_ft });
+        }
+        let found: HashMap<(u32, u32), conflict::Conflict> = conflict::find(&self.cfg.conflict, &kin)
+            .into_iter()
+            .map(|c| ((c.a.min(c.b), c.a.max(c.b)), c))
+            .collect();
+        for a in self.aircraft.values_mut() {
+            a.in_conflict = false;
+        }
+        for &(x, y) in found.keys() {
+            for addr in [x, y] {
+                if let Some(a) = self.aircraft.get_mut(&addr) {
+                    a.in_conflict = true;
+                }
+            }
+        }
+        let id = |aircraft: &HashMap<u32, Aircraft>, addr: u32| aircraft.get(&addr).map_or(0, |a| a.id);
+        let mut changes: Vec<(bool, conflict::Conflict)> = found
+            .iter()
+            .filter(|(k, _)| !self.conflicts.contains_key(k))
+            .map(|(_, c)| (true, *c))
+            .chain(self.conflicts.iter().filter(|(k, _)| !found.contains_key(k)).map(|(_, c)| (false, *c)))
+            .collect();
+        changes.sort_by_key(|(active, c)| (!active, c.a.min(c.b), c.a.max(c.b)));
+        for (active, c) in changes {
+            self.stats.conflicts += active as u64;
+            out.push(Output::Alert(Alert::Conflict {
+                t: now,
+                pair: [(c.a, id(&self.aircraft, c.a)), (c.b, id(&self.aircraft, c.b))],
+                active,
+                tau_s: c.tau_s,
+                t_cpa_s: c.t_cpa_s,
+                miss_m: c.miss_m,
+                dz_m: c.dz_m,
+            }));
+        }
+        self.conflicts = found;
+    }
+
     /// Moves time to `now`: held publications whose wait is over go out, and
     /// aircraft not heard for the drop time are forgotten.
-    pub fn advance(&mut self, now: f64, out: &mut Vec<TrackReport>) {
+    pub fn advance(&mut self, now: f64, out: &mut Vec<Output>) {
         while let Some(&(release, addr)) = self.held.front() {
             if release > now {
                 break;
             }
             self.held.pop_front();
             self.publish(addr, out);
+        }
+        if self.cfg.conflict.enabled && now >= self.next_conflict {
+            self.next_conflict = now + self.cfg.conflict.interval_s;
+            self.conflicts(now, out);
         }
         if now >= self.next_sweep {
             self.next_sweep = now + 1.0;
@@ -377,13 +529,13 @@ impl Fuser {
     }
 
     /// Everything held goes out (end of input).
-    pub fn finish(&mut self, out: &mut Vec<TrackReport>) {
+    pub fn finish(&mut self, out: &mut Vec<Output>) {
         while let Some((_, addr)) = self.held.pop_front() {
             self.publish(addr, out);
         }
     }
 
-    fn publish(&mut self, addr: u32, out: &mut Vec<TrackReport>) {
+    fn publish(&mut self, addr: u32, out: &mut Vec<Output>) {
         let Some(a) = self.aircraft.get_mut(&addr) else {
             return;
         };
@@ -438,13 +590,13 @@ impl Fuser {
             squawk: a.squawk,
         };
         if let Some(est) = fused {
-            out.push(report("fused", est, sources));
+            out.push(Output::Track(Box::new(report("fused", est, sources))));
             self.stats.published += 1;
         }
         if self.publish_source_tracks {
             for (s, est) in [(Source::Adsb, adsb), (Source::Mlat, mlat)] {
                 if let Some(est) = est {
-                    out.push(report(s.name(), est, vec![s.name()]));
+                    out.push(Output::Track(Box::new(report(s.name(), est, vec![s.name()]))));
                 }
             }
         }

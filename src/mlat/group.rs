@@ -34,6 +34,9 @@ pub struct GroupInfo {
     pub adsb_sigma_m: f64,
     /// The aircraft's ADS-B is not trusted (conformance monitor).
     pub suspect: bool,
+    /// The ADS-B position this transmission reported (lat, lon, 1-sigma per
+    /// axis m), whatever its accuracy: what the conformance monitor checks.
+    pub report: Option<(f64, f64, f64)>,
 }
 
 /// All copies of one transmission.

@@ -4,7 +4,7 @@
 use serde::Serialize;
 
 use crate::core::{Event, PositionReport};
-use crate::fuse::TrackReport;
+use crate::fuse::{Alert, TrackReport};
 use crate::mlat::MlatFix;
 
 #[derive(Serialize)]
@@ -96,6 +96,23 @@ pub fn track_record(r: &TrackReport) -> TrackRecord {
     }
 }
 
+/// `type: "alert"` records: `kind` says which.
+pub fn alert_record(a: &Alert) -> serde_json::Value {
+    let hex = |addr: u32| format!("{addr:06X}");
+    match *a {
+        Alert::AdsbSuspect { t, addr, id, suspect, offset_m, nis } => serde_json::json!({
+            "type": "alert", "kind": "adsb_suspect", "t": round(t, 1e6), "hex": hex(addr), "id": id,
+            "suspect": suspect, "offset_m": round(offset_m, 10.0), "nis": round(nis, 100.0),
+        }),
+        Alert::Conflict { t, pair, active, tau_s, t_cpa_s, miss_m, dz_m } => serde_json::json!({
+            "type": "alert", "kind": "conflict", "t": round(t, 1e6),
+            "pair": [hex(pair[0].0), hex(pair[1].0)], "ids": [pair[0].1, pair[1].1], "active": active,
+            "tau_s": round(tau_s, 10.0), "t_cpa_s": round(t_cpa_s, 10.0), "miss_m": round(miss_m, 10.0),
+            "dz_m": round(dz_m, 10.0),
+        }),
+    }
+}
+
 /// Writes one event as a JSON line; `receiver_id` names receivers by index.
 pub fn write_event<'a>(
     out: &mut impl std::io::Write,
@@ -111,6 +128,9 @@ pub fn write_event<'a>(
         }
         Event::Track(r) => {
             serde_json::to_writer(&mut *out, &track_record(r))?;
+        }
+        Event::Alert(a) => {
+            serde_json::to_writer(&mut *out, &alert_record(a))?;
         }
     }
     out.write_all(b"\n")

@@ -1,0 +1,123 @@
+//! Conformance monitor: does the timing agree with what an aircraft says?
+//!
+//! Each ADS-B position that was also multilaterated (the fix of the same
+//! transmission) gives a difference whose covariance is the sum of both:
+//! `d' (R_adsb + C_mlat)^-1 d` is chi-square with 2 degrees of freedom
+//! for an honest aircraft. A CUSUM over those values, with a reference
+//! well above the chi-square mean, stays at zero for honest traffic and
+//! climbs by tens per fix for an offset of a few hundred metres: one or two
+//! fixes flag a spoofer, and a chance excursion of an honest one would need
+//! several 1-in-1000 values in a row. The flag clears once the sum (capped
+//! at twice the threshold) is back at zero and the last few fixes conform.
+
+use serde::{Deserialize, Serialize};
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct ConformanceConfig {
+    /// Per-fix allowance subtracted from the chi-square(2) value.
+    pub reference: f64,
+    /// The sum that raises the flag.
+    pub threshold: f64,
+    /// Conforming fixes in a row (with the sum back at zero) that clear it.
+    pub clear_after: u32,
+}
+
+impl Default for ConformanceConfig {
+    fn default() -> Self {
+        ConformanceConfig { reference: 10.0, threshold: 30.0, clear_after: 5 }
+    }
+}
+
+impl ConformanceConfig {
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.reference > 2.0 && self.reference.is_finite()) {
+            return Err(format!("reference = {} must exceed 2 (the chi-square mean)", self.reference));
+        }
+        if !(self.threshold > 0.0 && self.threshold.is_finite()) {
+            return Err(format!("threshold = {} must be positive", self.threshold));
+        }
+        if self.clear_after == 0 {
+            return Err("clear_after must be at least 1".into());
+        }
+        Ok(())
+    }
+}
+
+/// One aircraft's monitor.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Monitor {
+    pub sum: f64,
+    pub suspect: bool,
+    conforming: u32,
+    /// Newest test value and offset (m), for the alert.
+    pub last_nis: f64,
+    pub last_offset_m: f64,
+}
+
+impl Monitor {
+    /// One ADS-B/MLAT pair: east/north difference (m) and its covariance.
+    /// Returns the new flag when it changed.
+    pub fn push(&mut self, cfg: &ConformanceConfig, d: [f64; 2], s: [[f64; 2]; 2]) -> Option<bool> {
+        let det = s[0][0] * s[1][1] - s[0][1] * s[1][0];
+        if !(det > 0.0 && s[0][0] > 0.0 && d.iter().all(|v| v.is_finite())) {
+            return None;
+        }
+        let nis = (s[1][1] * d[0] * d[0] - (s[0][1] + s[1][0]) * d[0] * d[1] + s[0][0] * d[1] * d[1]) / det;
+        self.last_nis = nis;
+        self.last_offset_m = d[0].hypot(d[1]);
+        // Capped at twice the threshold, so a flag clears in a few
+        // conforming fixes however far off the aircraft was.
+        self.sum = (self.sum + nis - cfg.reference).clamp(0.0, 2.0 * cfg.threshold);
+        let fits = nis < cfg.reference;
+        self.conforming = if fits { self.conforming + 1 } else { 0 };
+        if !self.suspect && self.sum > cfg.threshold {
+            self.suspect = true;
+            return Some(true);
+        }
+        if self.suspect && self.sum == 0.0 && self.conforming >= cfg.clear_after {
+            self.suspect = false;
+            return Some(false);
+        }
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+
+    #[test]
+    fn honest_never_flags_offsets_flag_at_once_and_clear() {
+        let cfg = ConformanceConfig::default();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        // ADS-B 38 m and MLAT 20 m per axis: 43 m combined.
+        let (sa, sm) = (37.8f64, 20.0f64);
+        let var = sa * sa + sm * sm;
+        let n = Normal::new(0.0, var.sqrt()).unwrap();
+        let s = [[var, 0.0], [0.0, var]];
+        let mut honest = Monitor::default();
+        for _ in 0..1_000_000 {
+            assert_eq!(honest.push(&cfg, [n.sample(&mut rng), n.sample(&mut rng)], s), None);
+        }
+        for offset in [300.0, 2000.0] {
+            let mut m = Monitor::default();
+            let mut fixes = 0;
+            while !m.suspect {
+                fixes += 1;
+                m.push(&cfg, [offset + n.sample(&mut rng), n.sample(&mut rng)], s);
+                assert!(fixes < 5, "{offset} m needed {fixes} fixes");
+            }
+            // Honest again: cleared after the configured run.
+            let mut k = 0;
+            while m.suspect {
+                k += 1;
+                m.push(&cfg, [n.sample(&mut rng), n.sample(&mut rng)], s);
+                assert!(k < 30);
+            }
+            assert!(k >= cfg.clear_after as usize);
+        }
+    }
+}

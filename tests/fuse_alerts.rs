@@ -1,0 +1,115 @@
+//! Alerts against truth: conflict prediction on a scripted encounter, and
+//! the conformance monitor on spoofers (2 km and 300 m offsets in a small
+//! world, and the two spoofers of tma-busy among 148 honest aircraft).
+
+use std::path::PathBuf;
+
+use fuse1090::config::Config;
+use fuse1090::eval::montecarlo::run_in_memory;
+use fuse1090::sim::scenario::Scenario;
+use serde_json::Value;
+
+fn scenario(name: &str) -> Scenario {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("fixtures/scenarios").join(format!("{name}.toml"));
+    Scenario::load(&p).unwrap()
+}
+
+/// Simulates and runs the default pipeline: (records, truth lines).
+fn run(s: &Scenario) -> (Vec<Value>, Vec<Value>) {
+    let (mut capture, mut truth) = (Vec::new(), Vec::new());
+    fuse1090::sim::simulate(s, &mut capture, &mut truth).unwrap();
+    let out = run_in_memory(&capture, &Config::default().core).unwrap();
+    let parse = |b: &[u8]| -> Vec<Value> {
+        String::from_utf8_lossy(b).lines().map(|l| serde_json::from_str(l).unwrap()).collect()
+    };
+    (parse(&out), parse(&truth))
+}
+
+fn alerts<'a>(records: &'a [Value], kind: &str) -> Vec<&'a Value> {
+    records.iter().filter(|r| r["type"] == "alert" && r["kind"] == kind).collect()
+}
+
+#[test]
+fn head_on_at_fl350_alerts_48_to_35_s_ahead_and_a_5_nm_pass_stays_quiet() {
+    let s = scenario("encounter");
+    let (records, _) = run(&s);
+    let cpa = s.start_unix + 100.0;
+    let conflicts = alerts(&records, "conflict");
+    let started: Vec<_> = conflicts.iter().filter(|a| a["active"] == true).collect();
+    assert_eq!(started.len(), 1, "{conflicts:?}");
+    let a = started[0];
+    assert_eq!(a["pair"].as_array().unwrap().len(), 2);
+    let mut pair: Vec<&str> = a["pair"].as_array().unwrap().iter().map(|h| h.as_str().unwrap()).collect();
+    pair.sort();
+    assert_eq!(pair, ["4B0001", "4B0002"]);
+    let ahead = cpa - a["t"].as_f64().unwrap();
+    assert!((35.0..=48.0).contains(&ahead), "alert {ahead:.1} s before closest approach");
+    // While in conflict both tracks go out at the densest period.
+    let t0 = a["t"].as_f64().unwrap();
+    let dense = records
+        .iter()
+        .filter(|r| r["type"] == "track" && r["hex"] == "4B0001")
+        .filter(|r| (t0 + 2.0..cpa).contains(&r["t"].as_f64().unwrap()))
+        .all(|r| r["period_s"] == 0.6);
+    assert!(dense);
+    let quiet =
+        records.iter().filter(|r| r["type"] == "track" && r["hex"] == "4B0003").all(|r| r["period_s"] == 0.8);
+    assert!(quiet, "NACp 9: 0.8 s outside conflicts");
+}
+
+/// The 8-segment world with its aircraft broadcasting positions offset by `offset`.
+fn spoofed(offset: Option<[f64; 2]>) -> (Vec<Value>, f64) {
+    let mut s = scenario("fusion-8seg-1hz");
+    s.aircraft[0].spoof_offset_m = offset;
+    let (records, _) = run(&s);
+    let first_fix = records.iter().find(|r| r["type"] == "mlat").unwrap()["t"].as_f64().unwrap();
+    (records, first_fix)
+}
+
+#[test]
+fn spoofers_2_km_and_300_m_off_are_flagged_within_seconds_and_kept_out() {
+    for offset in [[2000.0, 0.0], [0.0, 300.0]] {
+        let (records, first_fix) = spoofed(Some(offset));
+        let flags = alerts(&records, "adsb_suspect");
+        let first = flags.first().unwrap_or_else(|| panic!("{offset:?}: not flagged"));
+        assert_eq!(first["suspect"], true);
+        let delay = first["t"].as_f64().unwrap() - first_fix;
+        assert!(delay < 10.0, "{offset:?}: flagged {delay:.1} s after the first fix");
+        // Published tracks after the flag say so, and follow the truth
+        // (MLAT), not the broadcast.
+        let t_flag = first["t"].as_f64().unwrap();
+        let after: Vec<_> = records
+            .iter()
+            .filter(|r| r["type"] == "track" && r["t"].as_f64().unwrap() > t_flag + 2.0)
+            .collect();
+        assert!(!after.is_empty() && after.iter().all(|r| r["adsb_suspect"] == true));
+        assert!(after.iter().all(|r| r["sources"].as_array().unwrap().contains(&Value::from("mlat"))));
+    }
+    let (honest, _) = spoofed(None);
+    assert!(alerts(&honest, "adsb_suspect").is_empty());
+}
+
+#[test]
+fn tma_busy_both_spoofers_flagged_and_no_honest_aircraft() {
+    let mut s = scenario("tma-busy");
+    s.duration_s = 60.0;
+    let (records, truth) = run(&s);
+    let spoofers: Vec<&str> =
+        truth.iter().filter(|t| t["type"] == "spoof").map(|t| t["hex"].as_str().unwrap()).collect();
+    assert_eq!(spoofers.len(), 2);
+    let flags = alerts(&records, "adsb_suspect");
+    for f in &flags {
+        assert!(spoofers.contains(&f["hex"].as_str().unwrap()), "honest aircraft flagged: {f}");
+    }
+    for hex in &spoofers {
+        let first_fix = records
+            .iter()
+            .find(|r| r["type"] == "mlat" && r["hex"] == *hex)
+            .unwrap_or_else(|| panic!("{hex}: never multilaterated"))["t"]
+            .as_f64()
+            .unwrap();
+        let flag = flags.iter().find(|f| f["hex"] == *hex && f["suspect"] == true);
+        let t = flag.unwrap_or_else(|| panic!("{hex}: not flagged"))["t"].as_f64().unwrap();
+        assert!(t - first_fix < 10.0, "{hex}: flagged {:.1} s after its first fix", t - first_fix);
+    }
+}
