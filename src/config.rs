@@ -8,6 +8,7 @@ use anyhow::{Context, Result};
 use serde::Deserialize;
 
 use crate::core::CoreConfig;
+use crate::live::config::{InputConfig, OutputConfig, ReceiverConfig, ServiceConfig};
 
 #[derive(Clone, Debug, Default, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields, default)]
@@ -15,6 +16,14 @@ pub struct Config {
     pub core: CoreConfig,
     /// Publish per-source (adsb, mlat) tracks beside the fused ones.
     pub publish_source_tracks: bool,
+    pub service: ServiceConfig,
+    /// The live service's receivers, inputs and outputs.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub receiver: Vec<ReceiverConfig>,
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub input: Vec<InputConfig>,
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub output: Vec<OutputConfig>,
 }
 
 /// Reads a TOML file into `T`; errors name the file (and, from the parser,
@@ -40,9 +49,21 @@ impl Config {
         parse_toml::<Config>(text, name)?.validated(name)
     }
 
+    /// Every problem at once, each line naming the file and the table.
     fn validated(self, name: &str) -> Result<Config> {
-        self.core.validate().map_err(|e| anyhow::anyhow!("{name}: [core] {e}"))?;
-        Ok(self)
+        let mut errs: Vec<String> = Vec::new();
+        if let Err(e) = self.core.validate() {
+            errs.extend(e.lines().map(|l| format!("[core] {l}")));
+        }
+        errs.extend(crate::live::config::validate(&self.service, &self.receiver, &self.input, &self.output));
+        if errs.is_empty() {
+            Ok(self)
+        } else {
+            Err(anyhow::anyhow!(
+                "{}",
+                errs.iter().map(|e| format!("{name}: {e}")).collect::<Vec<_>>().join("\n")
+            ))
+        }
     }
 }
 
@@ -87,5 +108,38 @@ mod tests {
         assert!(e.contains("x.toml") && e.contains("line 2") && e.contains("unknown field"), "{e}");
         let e = Config::parse("[core]\ngroup_wait_s = -1\n", "x.toml").unwrap_err().to_string();
         assert!(e.contains("group_wait_s"), "{e}");
+    }
+
+    #[test]
+    fn every_problem_is_reported_at_once_with_its_table() {
+        let text = r#"
+[core]
+group_wait_s = 9
+[[receiver]]
+id = "a"
+lat = 95.0
+lon = 1.0
+alt_m = 0.0
+clock = "atomic"
+[[input]]
+kind = "beast_tcp_client"
+address = "127.0.0.1:30005"
+receiver = "nobody"
+[[output]]
+kind = "udp"
+format = "json"
+"#;
+        let e = Config::parse(text, "bad.toml").unwrap_err().to_string();
+        for needle in [
+            "bad.toml: [core] group_wait_s",
+            "[[receiver]] 1 (a): position out of range",
+            "[[receiver]] 1 (a): clock",
+            "[[input]] 1: receiver \"nobody\" is not declared",
+            "[[output]] 1: udp needs address",
+        ] {
+            assert!(e.contains(needle), "{needle:?} missing from:\n{e}");
+        }
+        let demo = concat!(env!("CARGO_MANIFEST_DIR"), "/config/demo.toml");
+        assert!(Config::load(std::path::Path::new(demo)).is_ok());
     }
 }

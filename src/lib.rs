@@ -13,6 +13,7 @@ pub mod eval;
 pub mod feed;
 pub mod fuse;
 pub mod geo;
+pub mod live;
 pub mod mlat;
 pub mod modes;
 pub mod publish;

@@ -75,14 +75,27 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Stream a capture's receivers to a running daemon over real sockets,
+    /// one connection per receiver, in real time (or X times faster).
+    Replay {
+        capture: PathBuf,
+        /// The daemon's configuration: which input takes which receiver.
+        #[arg(long)]
+        config: PathBuf,
+        #[arg(long, default_value_t = 1.0)]
+        speed: f64,
+    },
+    /// Validate a configuration: exit 0, or print every problem with its location.
+    CheckConfig { file: PathBuf },
 }
 
 fn main() -> ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
-        .with_writer(std::io::stderr)
-        .init();
     let cli = Cli::parse();
+    // The daemon and replay log what they do; batch commands only problems.
+    let live = matches!(&cli.command, Command::Run { capture: None, .. } | Command::Replay { .. });
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(if live { "info" } else { "warn" }));
+    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
     let result = match cli.command {
         Command::Decode { format, reference, clock, input } => {
             cmd::decode::run(cmd::decode::DecodeArgs { format, reference, clock, input })
@@ -91,6 +104,8 @@ fn main() -> ExitCode {
             cmd::run::run(cmd::run::RunArgs { config, capture, output, source_tracks })
         }
         Command::Sim { scenario, out } => cmd::sim::run(&scenario, &out),
+        Command::Replay { capture, config, speed } => cmd::replay::run(&capture, &config, speed),
+        Command::CheckConfig { file } => cmd::check_config(&file),
         Command::Eval { truth, tracks, scenario, seeds, config, json } => match (seeds, truth, tracks) {
             (Some(n), _, _) => cmd::eval::monte_carlo(scenario.as_deref(), n, config.as_deref(), json),
             (None, Some(truth), Some(tracks)) => cmd::eval::run(&truth, &tracks, scenario.as_deref(), json),

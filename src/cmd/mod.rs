@@ -3,6 +3,7 @@
 
 pub mod decode;
 pub mod eval;
+pub mod replay;
 pub mod run;
 pub mod sim;
 
@@ -13,4 +14,10 @@ pub fn print_stdout(text: &str) -> anyhow::Result<()> {
         Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e.into()),
         _ => Ok(()),
     }
+}
+
+/// `fuse1090 check-config FILE`: every problem at once, or nothing (exit 0).
+pub fn check_config(file: &std::path::Path) -> anyhow::Result<()> {
+    crate::config::Config::load(file)?;
+    print_stdout(&format!("{}: ok\n", file.display()))
 }

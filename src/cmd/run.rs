@@ -77,7 +77,7 @@ pub fn run(args: RunArgs) -> Result<()> {
         }
         (Some(_), None) => bail!("--capture needs --output"),
         (None, _) if args.config.is_none() => bail!("run needs --config (live) or --capture (offline)"),
-        (None, _) => bail!("the live daemon is not built yet; use --capture for offline runs"),
+        (None, _) => crate::live::run(args.config.as_deref().expect("checked above")),
     }
 }
 

@@ -100,6 +100,11 @@ impl FeedStats {
         self.mode_ac + self.mode_s_short + self.mode_s_long
     }
 
+    /// Input that did not become a frame: garbage bytes, broken and truncated frames.
+    pub fn input_errors(&self) -> u64 {
+        self.garbage_bytes + self.broken_frames + self.truncated_frames
+    }
+
     pub(crate) fn count_frame(&mut self, frame: &RawFrame) {
         match frame.len {
             2 => self.mode_ac += 1,

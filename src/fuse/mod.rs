@@ -115,6 +115,8 @@ pub struct TrackReport {
     pub adsb_suspect: bool,
     pub flight: Option<String>,
     pub squawk: Option<u16>,
+    /// Age (s) of the newest ADS-B and MLAT measurement, when recent.
+    pub ages_s: [Option<f64>; 2],
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -139,6 +141,9 @@ pub struct FuseStats {
     pub suspect_excluded: u64,
     pub conflicts: u64,
 }
+
+/// Slower tracks (taxiing, parked) are left out of conflict prediction (m/s).
+const MIN_CONFLICT_SPEED_MPS: f64 = 30.0;
 
 /// Speed no aircraft reaches (m/s).
 pub const MAX_SPEED_MPS: f64 = 1_200.0;
@@ -454,7 +459,12 @@ impl Fuser {
         let mut kin = Vec::new();
         for addr in addrs {
             let a = &self.aircraft[&addr];
-            if a.fused.stage != Stage::Confirmed || now - a.fused.last_position_t > self.tcfg.coast_after_s {
+            // Airborne traffic only: surface movements are not TCAS encounters.
+            if a.fused.stage != Stage::Confirmed
+                || now - a.fused.last_position_t > self.tcfg.coast_after_s
+                || a.surface
+                || a.fused.speed().is_none_or(|v| v < MIN_CONFLICT_SPEED_MPS)
+            {
                 continue;
             }
             let Some(e) = a.fused.estimate_at(now.max(a.fused.t())) else {
@@ -588,6 +598,8 @@ impl Fuser {
             adsb_suspect: a.adsb_suspect,
             flight: a.flight.clone(),
             squawk: a.squawk,
+            ages_s: [Source::Adsb, Source::Mlat]
+                .map(|s| Some((t - a.last_source_t[s as usize]).max(0.0)).filter(|age| *age <= window)),
         };
         if let Some(est) = fused {
             out.push(Output::Track(Box::new(report("fused", est, sources))));

@@ -103,16 +103,20 @@ impl Imm {
         // Model-matched update.
         let mut post = Vec::with_capacity(n);
         let mut lik = Vec::with_capacity(n);
-        for pred in &predicted {
+        for (pred, cj) in predicted.iter().zip(&c) {
             let u = pred.update_linear(m)?;
             post.push(u.post);
-            lik.push(u.likelihood);
+            lik.push(u.log_likelihood + cj.max(1e-300).ln());
         }
-        let total: f64 = (0..n).map(|j| lik[j] * c[j]).sum();
-        if !(total > 0.0 && total.is_finite()) {
+        // Model probabilities by log-sum-exp: a measurement far from every
+        // model would underflow plain likelihoods to zero.
+        let top = lik.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if !top.is_finite() {
             return None;
         }
-        let mu: Vec<f64> = (0..n).map(|j| lik[j] * c[j] / total).collect();
+        let w: Vec<f64> = lik.iter().map(|l| (l - top).exp()).collect();
+        let total: f64 = w.iter().sum();
+        let mu: Vec<f64> = w.iter().map(|x| x / total).collect();
         // NIS of the combined prediction (the track's own consistency check).
         let pred = combine(&predicted, &c);
         let nis = pred.update_linear(m).map_or(f64::INFINITY, |u| u.nis);

@@ -44,8 +44,10 @@ pub struct Updated {
     pub post: Gaussian,
     /// Normalised innovation squared (chi-square with M dof when consistent).
     pub nis: f64,
-    /// Measurement likelihood N(innovation; 0, S).
+    /// Measurement likelihood N(innovation; 0, S), and its logarithm (which
+    /// does not underflow for a far-off measurement).
     pub likelihood: f64,
+    pub log_likelihood: f64,
 }
 
 /// Position rows of the state.
@@ -83,8 +85,13 @@ impl Gaussian {
         let nis = (nu.transpose() * s_inv * nu)[0];
         let norm = (2.0 * std::f64::consts::PI).powi(M as i32 / 2)
             * if M % 2 == 1 { (2.0 * std::f64::consts::PI).sqrt() } else { 1.0 };
-        let likelihood = (-0.5 * nis).exp() / (norm * det.sqrt());
-        Some(Updated { post: Gaussian { x: self.x + k * nu, p: (p + p.transpose()) * 0.5 }, nis, likelihood })
+        let log_likelihood = -0.5 * nis - (norm * det.sqrt()).ln();
+        Some(Updated {
+            post: Gaussian { x: self.x + k * nu, p: (p + p.transpose()) * 0.5 },
+            nis,
+            likelihood: log_likelihood.exp(),
+            log_likelihood,
+        })
     }
 
     /// Covariance symmetric, finite and positive definite.

@@ -352,8 +352,18 @@ impl Track {
                 if let Some((c, var)) = climb {
                     self.vertical(m.t, 1, c, var);
                 }
+                let gate = self.gate;
                 match &mut self.state.imm {
                     None => Outcome::Early,
+                    // A velocity far outside the track's own: left out, not applied.
+                    Some(imm)
+                        if {
+                            let (nu, s) = imm.predicted(dt).innovation(&kf::velocity(v_en, cov));
+                            s.try_inverse().is_none_or(|si| (nu.transpose() * si * nu)[0] > gate)
+                        } =>
+                    {
+                        Outcome::Gated
+                    }
                     Some(imm) => match (imm.predicted(dt), imm.step_linear(dt, &kf::velocity(v_en, cov))) {
                         (pred, Some(step)) => {
                             if self.keep_gain {

@@ -1,0 +1,231 @@
+//! The live service's part of the configuration: receivers, inputs,
+//! outputs and operations. Checked as a whole: every problem is reported at
+//! once, each with the table it is in (`[[input]] 2: ...`).
+
+use std::net::{IpAddr, SocketAddr};
+
+use serde::{Deserialize, Serialize};
+
+use crate::feed::capture::{ClockKind, ReceiverDecl};
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct ServiceConfig {
+    /// Record every frame received to this capture file (v1), for replay; empty: off.
+    pub record: String,
+    /// One stats line in the log this often (s).
+    pub stats_interval_s: f64,
+    /// Prometheus text endpoint (host:port); empty: off.
+    pub metrics_listen: String,
+    /// ASTERIX data source identifier and service identification.
+    pub sac: u8,
+    pub sic: u8,
+    pub service_id: u8,
+    /// Largest UDP datagram an output sends (bytes).
+    pub max_datagram_bytes: usize,
+    /// Frames waiting between the inputs and the core; beyond it frames are dropped and counted.
+    pub queue_frames: usize,
+    /// Demo: replay this capture into our own inputs at start (empty: off), at this speed.
+    pub demo_capture: String,
+    pub demo_speed: f64,
+}
+
+impl Default for ServiceConfig {
+    fn default() -> Self {
+        ServiceConfig {
+            record: String::new(),
+            stats_interval_s: 60.0,
+            metrics_listen: String::new(),
+            sac: 0,
+            sic: 1,
+            service_id: 1,
+            max_datagram_bytes: 1400,
+            queue_frames: 65_536,
+            demo_capture: String::new(),
+            demo_speed: 1.0,
+        }
+    }
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ReceiverConfig {
+    pub id: String,
+    pub lat: f64,
+    pub lon: f64,
+    /// Antenna height above the WGS-84 ellipsoid (m).
+    pub alt_m: f64,
+    /// "beast12" (free-running 12 MHz counter) or "gps" (Radarcape GPS time).
+    pub clock: String,
+    /// Source address that identifies it on TCP-server and UDP inputs.
+    #[serde(default)]
+    pub source: Option<IpAddr>,
+    /// Most frames per second accepted from it; more are dropped and counted (0: no limit).
+    #[serde(default)]
+    pub max_rate: f64,
+}
+
+impl ReceiverConfig {
+    pub fn decl(&self) -> ReceiverDecl {
+        let clock = if self.clock == "gps" { ClockKind::Gps } else { ClockKind::Beast12 };
+        ReceiverDecl { id: self.id.clone(), lat: self.lat, lon: self.lon, alt: self.alt_m, clock }
+    }
+}
+
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum InputKind {
+    /// Connects to a receiver's Beast output (readsb 30005, Radarcape 10003).
+    BeastTcpClient,
+    /// Receivers connect and push Beast (readsb --net-connector ...,beast_out).
+    BeastTcpServer,
+    /// Datagrams of Beast or AVR frames.
+    Udp,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct InputConfig {
+    pub kind: InputKind,
+    /// beast_tcp_client: where to connect. Others: where to listen.
+    pub address: SocketAddr,
+    /// beast_tcp_client: the receiver at the other end. Others: optional, a
+    /// receiver for every sender (else senders are told apart by `source`).
+    #[serde(default)]
+    pub receiver: Option<String>,
+    /// beast_tcp_server and udp: the receivers allowed to send here (each
+    /// recognised by its `source`); empty: any receiver with a source.
+    #[serde(default)]
+    pub receivers: Vec<String>,
+    /// udp: "beast" or "avr".
+    #[serde(default = "beast")]
+    pub format: String,
+}
+
+impl InputConfig {
+    /// Whether receiver `r` may reach the service through this input.
+    pub fn takes(&self, r: &ReceiverConfig) -> bool {
+        match &self.receiver {
+            Some(id) => *id == r.id,
+            None => r.source.is_some() && (self.receivers.is_empty() || self.receivers.contains(&r.id)),
+        }
+    }
+}
+
+fn beast() -> String {
+    "beast".into()
+}
+
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum OutputFormat {
+    Json,
+    Asterix062,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct OutputConfig {
+    /// "udp" (unicast or multicast) or "stdout" (JSON lines, for a look).
+    #[serde(default = "udp")]
+    pub kind: String,
+    #[serde(default)]
+    pub address: Option<SocketAddr>,
+    pub format: OutputFormat,
+    /// Multicast: time to live and the interface address to send from.
+    #[serde(default = "one")]
+    pub multicast_ttl: u32,
+    #[serde(default)]
+    pub multicast_interface: Option<std::net::Ipv4Addr>,
+}
+
+fn udp() -> String {
+    "udp".into()
+}
+
+fn one() -> u32 {
+    1
+}
+
+/// Every problem of the live part, one per line.
+pub fn validate(
+    service: &ServiceConfig,
+    receivers: &[ReceiverConfig],
+    inputs: &[InputConfig],
+    outputs: &[OutputConfig],
+) -> Vec<String> {
+    let mut errs = Vec::new();
+    if !(service.stats_interval_s > 0.0 && service.stats_interval_s.is_finite()) {
+        errs.push(format!("[service] stats_interval_s = {} must be positive", service.stats_interval_s));
+    }
+    if !service.metrics_listen.is_empty() && service.metrics_listen.parse::<SocketAddr>().is_err() {
+        errs.push(format!("[service] metrics_listen = {:?} is not host:port", service.metrics_listen));
+    }
+    if !(64..=65_000).contains(&service.max_datagram_bytes) {
+        errs.push(format!(
+            "[service] max_datagram_bytes = {} must be in 64..=65000",
+            service.max_datagram_bytes
+        ));
+    }
+    if service.queue_frames == 0 {
+        errs.push("[service] queue_frames must be positive".into());
+    }
+    if !(service.demo_speed > 0.0 && service.demo_speed.is_finite()) {
+        errs.push(format!("[service] demo_speed = {} must be positive", service.demo_speed));
+    }
+    for (i, r) in receivers.iter().enumerate() {
+        let at = format!("[[receiver]] {} ({})", i + 1, r.id);
+        if r.id.is_empty() || r.id.contains(char::is_whitespace) {
+            errs.push(format!("{at}: id must be a non-empty word"));
+        }
+        if receivers[..i].iter().any(|o| o.id == r.id) {
+            errs.push(format!("{at}: id used twice"));
+        }
+        if !(r.lat.abs() <= 90.0 && r.lon.abs() <= 180.0 && r.alt_m.is_finite()) {
+            errs.push(format!("{at}: position out of range"));
+        }
+        if r.clock != "beast12" && r.clock != "gps" {
+            errs.push(format!("{at}: clock = {:?}: beast12 or gps", r.clock));
+        }
+        if let Some(s) = r.source {
+            if receivers[..i].iter().any(|o| o.source == Some(s)) {
+                errs.push(format!("{at}: source {s} used twice"));
+            }
+        }
+        if !(r.max_rate >= 0.0 && r.max_rate.is_finite()) {
+            errs.push(format!("{at}: max_rate must be zero or positive"));
+        }
+    }
+    let known = |id: &str| receivers.iter().any(|r| r.id == id);
+    for (i, input) in inputs.iter().enumerate() {
+        let at = format!("[[input]] {}", i + 1);
+        match (&input.receiver, input.kind) {
+            (None, InputKind::BeastTcpClient) => errs.push(format!("{at}: beast_tcp_client needs receiver")),
+            (Some(id), _) if !known(id) => errs.push(format!("{at}: receiver {id:?} is not declared")),
+            _ => {}
+        }
+        for id in &input.receivers {
+            if !known(id) {
+                errs.push(format!("{at}: receivers: {id:?} is not declared"));
+            }
+        }
+        if input.format != "beast" && input.format != "avr" {
+            errs.push(format!("{at}: format = {:?}: beast or avr", input.format));
+        }
+        if input.format == "avr" && input.kind != InputKind::Udp {
+            errs.push(format!("{at}: avr only over udp"));
+        }
+    }
+    for (i, o) in outputs.iter().enumerate() {
+        let at = format!("[[output]] {}", i + 1);
+        match o.kind.as_str() {
+            "udp" if o.address.is_none() => errs.push(format!("{at}: udp needs address")),
+            "udp" | "stdout" => {}
+            k => errs.push(format!("{at}: kind = {k:?}: udp or stdout")),
+        }
+        if o.kind == "stdout" && o.format != OutputFormat::Json {
+            errs.push(format!("{at}: stdout prints json only"));
+        }
+    }
+    errs
+}

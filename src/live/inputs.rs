@@ -1,0 +1,235 @@
+//! Input tasks: Beast TCP client (reconnecting with capped exponential
+//! backoff and jitter), Beast TCP server (senders identified by their
+//! configured source address, unknown ones refused and counted), and UDP
+//! datagrams of Beast or AVR (large receive buffer, per-receiver rate limit).
+//!
+//! Every task turns bytes into frames with the feed parsers and hands them
+//! to the core through a bounded queue without waiting: a full queue drops
+//! the frame and counts it, so a slow core never stalls a socket and one
+//! flooding receiver cannot starve the others beyond its rate limit.
+
+use std::collections::HashMap;
+use std::net::{IpAddr, SocketAddr};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{SyncSender, TrySendError};
+use std::sync::{Arc, RwLock};
+use std::time::Duration;
+
+use rand::Rng;
+use socket2::{Domain, Protocol, Socket, Type};
+use tokio::io::AsyncReadExt;
+use tokio::net::{TcpListener, TcpStream, UdpSocket};
+
+use super::config::{InputConfig, InputKind, ReceiverConfig};
+use super::{unix_now, ToCore};
+use crate::feed::{parser_for, FeedEvent, FrameParser, InputFormat};
+
+/// Per-receiver counters, shared with the stats line and the metrics.
+#[derive(Debug, Default)]
+pub struct RxCounters {
+    pub frames: AtomicU64,
+    pub bytes: AtomicU64,
+    pub input_errors: AtomicU64,
+    pub queue_drops: AtomicU64,
+    pub throttled: AtomicU64,
+    pub connects: AtomicU64,
+    pub disconnects: AtomicU64,
+}
+
+/// The receivers known to the service: index (as the core knows them),
+/// configuration and counters. Receivers are only ever added (SIGHUP), so
+/// indices stay valid.
+#[derive(Default)]
+pub struct Registry {
+    pub receivers: RwLock<Vec<(ReceiverConfig, Arc<RxCounters>)>>,
+    pub unknown_senders: AtomicU64,
+    pub queue_drops: AtomicU64,
+}
+
+impl Registry {
+    pub fn index_of(&self, id: &str) -> Option<usize> {
+        self.receivers.read().expect("registry").iter().position(|(r, _)| r.id == id)
+    }
+
+    /// The receiver sending from `ip`, if this input takes it.
+    fn by_source(&self, ip: IpAddr, input: &InputConfig) -> Option<usize> {
+        self.receivers
+            .read()
+            .expect("registry")
+            .iter()
+            .position(|(r, _)| r.source == Some(ip) && input.takes(r))
+    }
+
+    fn counters(&self, rx: usize) -> Arc<RxCounters> {
+        self.receivers.read().expect("registry")[rx].1.clone()
+    }
+
+    fn max_rate(&self, rx: usize) -> f64 {
+        self.receivers.read().expect("registry")[rx].0.max_rate
+    }
+}
+
+/// Parser output to the core.
+fn forward(tx: &SyncSender<ToCore>, reg: &Registry, c: &RxCounters, rx: usize, ev: FeedEvent) {
+    if let FeedEvent::Frame(frame) = ev {
+        c.frames.fetch_add(1, Ordering::Relaxed);
+        match tx.try_send(ToCore::Frame { rx, arrival: unix_now(), frame }) {
+            Ok(()) => {}
+            Err(TrySendError::Full(_)) => {
+                c.queue_drops.fetch_add(1, Ordering::Relaxed);
+                reg.queue_drops.fetch_add(1, Ordering::Relaxed);
+            }
+            Err(TrySendError::Disconnected(_)) => {}
+        }
+    }
+}
+
+/// Reads a Beast stream until it ends; returns why.
+async fn stream(
+    mut sock: TcpStream,
+    tx: &SyncSender<ToCore>,
+    reg: &Registry,
+    rx: usize,
+) -> std::io::Result<()> {
+    let c = reg.counters(rx);
+    let mut parser = parser_for(InputFormat::Beast);
+    let mut buf = vec![0u8; 64 * 1024];
+    loop {
+        let n = sock.read(&mut buf).await?;
+        if n == 0 {
+            return Ok(());
+        }
+        c.bytes.fetch_add(n as u64, Ordering::Relaxed);
+        let before = parser.stats().input_errors();
+        parser.push(&buf[..n], &mut |ev| forward(tx, reg, &c, rx, ev));
+        c.input_errors.fetch_add(parser.stats().input_errors() - before, Ordering::Relaxed);
+    }
+}
+
+/// Spawns the task of one input.
+pub fn spawn(input: InputConfig, tx: SyncSender<ToCore>, reg: Arc<Registry>) -> tokio::task::JoinHandle<()> {
+    tokio::spawn(async move {
+        let r = match input.kind {
+            InputKind::BeastTcpClient => tcp_client(&input, &tx, &reg).await,
+            InputKind::BeastTcpServer => tcp_server(&input, tx, reg.clone()).await,
+            InputKind::Udp => udp(&input, &tx, &reg).await,
+        };
+        if let Err(e) = r {
+            tracing::error!(address = %input.address, "input stopped: {e}");
+        }
+    })
+}
+
+async fn tcp_client(input: &InputConfig, tx: &SyncSender<ToCore>, reg: &Registry) -> std::io::Result<()> {
+    let id = input.receiver.as_deref().unwrap_or_default();
+    let Some(rx) = reg.index_of(id) else {
+        return Err(std::io::Error::other(format!("receiver {id} unknown")));
+    };
+    let c = reg.counters(rx);
+    let mut failures = 0u32;
+    loop {
+        match tokio::time::timeout(Duration::from_secs(5), TcpStream::connect(input.address)).await {
+            Ok(Ok(sock)) => {
+                failures = 0;
+                c.connects.fetch_add(1, Ordering::Relaxed);
+                tracing::info!(receiver = id, address = %input.address, "connected");
+                let r = stream(sock, tx, reg, rx).await;
+                c.disconnects.fetch_add(1, Ordering::Relaxed);
+                tracing::warn!(
+                    receiver = id,
+                    "disconnected: {}",
+                    r.err().map_or("end of stream".into(), |e| e.to_string())
+                );
+            }
+            Ok(Err(e)) => {
+                if failures == 0 {
+                    tracing::warn!(receiver = id, address = %input.address, "cannot connect: {e}");
+                }
+                failures += 1;
+            }
+            Err(_) => failures += 1,
+        }
+        // Capped exponential backoff with +-25% jitter.
+        let base = (0.5 * 2f64.powi(failures.min(6) as i32)).min(30.0);
+        let wait = base * rand::thread_rng().gen_range(0.75..1.25);
+        tokio::time::sleep(Duration::from_secs_f64(wait)).await;
+    }
+}
+
+async fn tcp_server(input: &InputConfig, tx: SyncSender<ToCore>, reg: Arc<Registry>) -> std::io::Result<()> {
+    let listener = TcpListener::bind(input.address).await?;
+    let fixed = input.receiver.as_deref().and_then(|id| reg.index_of(id));
+    loop {
+        let (sock, peer) = listener.accept().await?;
+        let Some(rx) = fixed.or_else(|| reg.by_source(peer.ip(), input)) else {
+            let n = reg.unknown_senders.fetch_add(1, Ordering::Relaxed) + 1;
+            if n.is_power_of_two() {
+                tracing::warn!(peer = %peer, refused = n, "unknown sender refused");
+            }
+            drop(sock);
+            continue;
+        };
+        let (tx, reg) = (tx.clone(), reg.clone());
+        tokio::spawn(async move {
+            let c = reg.counters(rx);
+            c.connects.fetch_add(1, Ordering::Relaxed);
+            tracing::info!(peer = %peer, receiver = rx, "receiver connected");
+            let r = stream(sock, &tx, &reg, rx).await;
+            c.disconnects.fetch_add(1, Ordering::Relaxed);
+            tracing::warn!(peer = %peer, "receiver disconnected: {}", r.err().map_or("end of stream".into(), |e| e.to_string()));
+        });
+    }
+}
+
+/// Token bucket of one receiver (frames per second, one second of burst).
+struct Bucket {
+    tokens: f64,
+    at: f64,
+}
+
+async fn udp(input: &InputConfig, tx: &SyncSender<ToCore>, reg: &Registry) -> std::io::Result<()> {
+    let domain = if input.address.is_ipv4() { Domain::IPV4 } else { Domain::IPV6 };
+    let s = Socket::new(domain, Type::DGRAM, Some(Protocol::UDP))?;
+    // Bursts of many receivers at once: a large buffer (the kernel caps it).
+    let _ = s.set_recv_buffer_size(8 << 20);
+    s.set_reuse_address(true)?;
+    s.bind(&input.address.into())?;
+    s.set_nonblocking(true)?;
+    let sock = UdpSocket::from_std(s.into())?;
+    let format = if input.format == "avr" { InputFormat::Avr } else { InputFormat::Beast };
+    let fixed = input.receiver.as_deref().and_then(|id| reg.index_of(id));
+    let mut parsers: HashMap<usize, Box<dyn FrameParser + Send>> = HashMap::new();
+    let mut buckets: HashMap<usize, Bucket> = HashMap::new();
+    let mut buf = vec![0u8; 65_536];
+    loop {
+        let (n, peer): (usize, SocketAddr) = sock.recv_from(&mut buf).await?;
+        let Some(rx) = fixed.or_else(|| reg.by_source(peer.ip(), input)) else {
+            let k = reg.unknown_senders.fetch_add(1, Ordering::Relaxed) + 1;
+            if k.is_power_of_two() {
+                tracing::warn!(peer = %peer, refused = k, "datagram from an unknown sender dropped");
+            }
+            continue;
+        };
+        let c = reg.counters(rx);
+        c.bytes.fetch_add(n as u64, Ordering::Relaxed);
+        let rate = reg.max_rate(rx);
+        let parser = parsers.entry(rx).or_insert_with(|| parser_for(format));
+        let before = parser.stats().input_errors();
+        let mut frames = Vec::new();
+        parser.push_datagram(&buf[..n], &mut |ev| frames.push(ev));
+        c.input_errors.fetch_add(parser.stats().input_errors() - before, Ordering::Relaxed);
+        if rate > 0.0 {
+            let now = unix_now();
+            let b = buckets.entry(rx).or_insert(Bucket { tokens: rate, at: now });
+            b.tokens = (b.tokens + (now - b.at) * rate).min(rate);
+            b.at = now;
+            let allowed = (b.tokens.max(0.0) as usize).min(frames.len());
+            b.tokens -= frames.len() as f64;
+            c.throttled.fetch_add((frames.len() - allowed) as u64, Ordering::Relaxed);
+            frames.truncate(allowed);
+        }
+        for ev in frames {
+            forward(tx, reg, &c, rx, ev);
+        }
+    }
+}

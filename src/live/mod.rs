@@ -1,0 +1,307 @@
+//! The live service (`fuse1090 run --config FILE`): sockets in, the same
+//! sans-IO core as `run --capture`, datagrams out.
+//!
+//! Shaped like mini-redis: a tokio runtime owns the sockets (one task per
+//! input, see [`inputs`]) and the signals; the core runs on its own thread,
+//! fed through one bounded queue, and owns the outputs, so the processing is
+//! exactly the offline pipeline with the system clock as its time. SIGTERM
+//! and SIGINT stop the inputs, let the core publish what it holds and end
+//! within two seconds; SIGHUP re-reads the configuration and replaces
+//! receivers (added, never renumbered), inputs and outputs while the core,
+//! and so every track, stays. systemd is told READY once the sockets are
+//! bound and fed WATCHDOG from the core loop, so a stuck core is restarted.
+
+pub mod config;
+pub mod inputs;
+pub mod outputs;
+pub mod replay;
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::Ordering;
+use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+
+use crate::config::Config;
+use crate::core::{Core, Event};
+use crate::feed::capture::{CaptureWriter, ReceiverDecl};
+use crate::feed::RawFrame;
+use inputs::Registry;
+use outputs::Outputs;
+
+/// What the sockets and the signal handlers tell the core thread.
+pub enum ToCore {
+    Frame { rx: usize, arrival: f64, frame: RawFrame },
+    AddReceiver(ReceiverDecl),
+    Outputs(Outputs),
+    Shutdown,
+}
+
+/// System time as Unix seconds.
+pub fn unix_now() -> f64 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64())
+}
+
+/// Runs the service until SIGTERM or SIGINT.
+pub fn run(config_path: &Path) -> Result<()> {
+    let cfg = Config::load(config_path)?;
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
+    rt.block_on(serve(config_path.to_path_buf(), cfg))
+}
+
+async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
+    if !cfg.service.metrics_listen.is_empty() {
+        let addr: std::net::SocketAddr = cfg.service.metrics_listen.parse().context("metrics_listen")?;
+        metrics_exporter_prometheus::PrometheusBuilder::new()
+            .with_http_listener(addr)
+            .install()
+            .context("cannot start the Prometheus endpoint")?;
+        tracing::info!(address = %addr, "Prometheus metrics");
+    }
+    let registry = Arc::new(Registry::default());
+    let (tx, rx) = sync_channel::<ToCore>(cfg.service.queue_frames);
+    let mut core_cfg = cfg.core.clone();
+    core_cfg.publish_source_tracks = cfg.publish_source_tracks;
+    let mut decls = Vec::new();
+    for r in &cfg.receiver {
+        registry.receivers.write().expect("registry").push((r.clone(), Default::default()));
+        decls.push(r.decl());
+    }
+    let mut outputs = Outputs::new(&cfg.output, &cfg.service);
+    outputs.receiver_ids = cfg.receiver.iter().map(|r| r.id.clone()).collect();
+    let recorder = match cfg.service.record.as_str() {
+        "" => None,
+        p => Some(
+            CaptureWriter::new(
+                std::io::BufWriter::new(
+                    std::fs::File::create(p).with_context(|| format!("cannot create the recording {p}"))?,
+                ),
+                "fuse1090 live recording",
+            )
+            .with_context(|| format!("writing {p}"))?,
+        ),
+    };
+    let stats_every = cfg.service.stats_interval_s;
+    let reg = registry.clone();
+    let core_thread = std::thread::Builder::new()
+        .name("core".into())
+        .spawn(move || core_loop(core_cfg, decls, outputs, recorder, rx, reg, stats_every))?;
+
+    let mut tasks: Vec<tokio::task::JoinHandle<()>> =
+        cfg.input.iter().map(|i| inputs::spawn(i.clone(), tx.clone(), registry.clone())).collect();
+    // Give the listeners a moment to bind before saying we are ready.
+    tokio::time::sleep(Duration::from_millis(50)).await;
+    let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
+    tracing::info!(
+        inputs = cfg.input.len(),
+        outputs = cfg.output.len(),
+        receivers = cfg.receiver.len(),
+        "running"
+    );
+    if !cfg.service.demo_capture.is_empty() {
+        let (capture, speed, demo_cfg) =
+            (PathBuf::from(&cfg.service.demo_capture), cfg.service.demo_speed, cfg.clone());
+        tasks.push(tokio::spawn(async move {
+            match replay::replay(&capture, &demo_cfg, speed).await {
+                Ok(n) => tracing::info!(frames = n, "demo replay finished"),
+                Err(e) => tracing::error!("demo replay: {e:#}"),
+            }
+        }));
+    }
+
+    let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
+    let mut hup = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup())?;
+    let mut current = cfg;
+    loop {
+        tokio::select! {
+            _ = term.recv() => break,
+            _ = tokio::signal::ctrl_c() => break,
+            _ = hup.recv() => {
+                match Config::load(&path) {
+                    Ok(new) => {
+                        tracing::info!("SIGHUP: configuration re-read");
+                        for r in &new.receiver {
+                            if registry.index_of(&r.id).is_none() {
+                                registry.receivers.write().expect("registry").push((r.clone(), Default::default()));
+                                let _ = tx.send(ToCore::AddReceiver(r.decl()));
+                            } else {
+                                // Same index, new settings (source, rate).
+                                let mut w = registry.receivers.write().expect("registry");
+                                if let Some(e) = w.iter_mut().find(|(c, _)| c.id == r.id) {
+                                    e.0 = r.clone();
+                                }
+                            }
+                        }
+                        let mut outs = Outputs::new(&new.output, &new.service);
+                        outs.receiver_ids = registry.receivers.read().expect("registry").iter().map(|(r, _)| r.id.clone()).collect();
+                        let _ = tx.send(ToCore::Outputs(outs));
+                        if new.input != current.input {
+                            for t in tasks.drain(..) {
+                                t.abort();
+                            }
+                            tasks = new.input.iter().map(|i| inputs::spawn(i.clone(), tx.clone(), registry.clone())).collect();
+                        }
+                        current = new;
+                    }
+                    Err(e) => tracing::error!("SIGHUP: configuration refused, keeping the old one:\n{e:#}"),
+                }
+            }
+        }
+    }
+    tracing::info!("stopping");
+    for t in tasks {
+        t.abort();
+    }
+    let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
+    let _ = tx.send(ToCore::Shutdown);
+    drop(tx);
+    let _ = tokio::task::spawn_blocking(move || core_thread.join()).await;
+    Ok(())
+}
+
+/// The core thread: frames in, events out to the outputs, stats and watchdog.
+fn core_loop(
+    cfg: crate::core::CoreConfig,
+    decls: Vec<ReceiverDecl>,
+    mut outputs: Outputs,
+    mut recorder: Option<CaptureWriter<std::io::BufWriter<std::fs::File>>>,
+    rx: Receiver<ToCore>,
+    registry: Arc<Registry>,
+    stats_every: f64,
+) {
+    let mut core = Core::new(&cfg);
+    for d in decls {
+        if let Some(r) = &mut recorder {
+            let _ = r.receiver(&d);
+        }
+        core.add_receiver(d);
+    }
+    let mut events: Vec<Event> = Vec::new();
+    let watchdog = sd_notify::watchdog_enabled();
+    let mut last_ping = Instant::now();
+    let mut next_metrics = 0.0;
+    let mut next_stats = unix_now() + stats_every;
+    let mut last = unix_now();
+    let mut dispatched = 0u64;
+    'run: loop {
+        let first = rx.recv_timeout(Duration::from_millis(10));
+        let mut msg = match first {
+            Ok(m) => Some(m),
+            Err(RecvTimeoutError::Timeout) => None,
+            Err(RecvTimeoutError::Disconnected) => break,
+        };
+        // A batch: whatever is queued, up to a bound, then one advance.
+        let mut n = 0;
+        while let Some(m) = msg.take() {
+            match m {
+                ToCore::Frame { rx: r, arrival, frame } => {
+                    if let Some(w) = &mut recorder {
+                        let _ = w.frame(arrival, r, &frame);
+                    }
+                    core.on_frame(r, arrival, &frame, &mut events);
+                    dispatched += 1;
+                }
+                ToCore::AddReceiver(d) => {
+                    if let Some(w) = &mut recorder {
+                        let _ = w.receiver(&d);
+                    }
+                    core.add_receiver(d);
+                }
+                ToCore::Outputs(o) => outputs = o,
+                ToCore::Shutdown => break 'run,
+            }
+            n += 1;
+            if n < 4096 {
+                msg = rx.try_recv().ok();
+            }
+        }
+        let now = unix_now();
+        core.advance(now, &mut events);
+        outputs.publish(&events, now);
+        events.clear();
+        if watchdog.is_some_and(|w| last_ping.elapsed() * 2 >= w) {
+            let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
+            last_ping = Instant::now();
+        }
+        if now >= next_stats {
+            stats_line(&core, &registry, &outputs, now - last);
+            next_stats = now + stats_every;
+            last = now;
+        }
+        if now >= next_metrics {
+            metrics(&core, &registry, &outputs, dispatched);
+            next_metrics = now + 1.0;
+        }
+    }
+    core.finish(&mut events);
+    outputs.publish(&events, unix_now());
+    if let Some(w) = recorder {
+        let _ = w.into_inner().into_inner().map(|f| f.sync_all());
+    }
+    stats_line(&core, &registry, &outputs, unix_now() - last);
+}
+
+fn stats_line(core: &Core, reg: &Registry, outputs: &Outputs, span_s: f64) {
+    let s = core.stats();
+    let f = core.fuser().stats();
+    let per_rx: Vec<String> = reg
+        .receivers
+        .read()
+        .expect("registry")
+        .iter()
+        .map(|(r, c)| {
+            format!(
+                "{}={}/{}err/{}drop/{}thr",
+                r.id,
+                c.frames.load(Ordering::Relaxed),
+                c.input_errors.load(Ordering::Relaxed),
+                c.queue_drops.load(Ordering::Relaxed),
+                c.throttled.load(Ordering::Relaxed)
+            )
+        })
+        .collect();
+    let out_err: u64 = outputs.dests.iter().map(|d| d.errors).sum();
+    tracing::info!(
+        "stats: frames {} [{}], messages {}, aircraft {}, tracks {}, fixes {} ({:.1}/s), suspects {}, conflicts {}, \
+         unknown senders {}, queue drops {}, output errors {}, mlat {}",
+        s.frames,
+        per_rx.join(" "),
+        s.messages,
+        core.decoder().stats().aircraft_created,
+        core.fuser().tracks(),
+        s.fixes,
+        s.fixes as f64 / span_s.max(1e-9),
+        f.suspect_flags,
+        f.conflicts,
+        reg.unknown_senders.load(Ordering::Relaxed),
+        reg.queue_drops.load(Ordering::Relaxed),
+        out_err,
+        core.mlat().stats.fixes,
+    );
+}
+
+fn metrics(core: &Core, reg: &Registry, outputs: &Outputs, dispatched: u64) {
+    let s = core.stats();
+    metrics::counter!("fuse1090_frames_total").absolute(s.frames);
+    metrics::counter!("fuse1090_frames_dispatched_total").absolute(dispatched);
+    metrics::counter!("fuse1090_messages_total").absolute(s.messages);
+    metrics::counter!("fuse1090_mlat_fixes_total").absolute(s.fixes);
+    metrics::gauge!("fuse1090_tracks").set(core.fuser().tracks() as f64);
+    metrics::counter!("fuse1090_unknown_senders_total").absolute(reg.unknown_senders.load(Ordering::Relaxed));
+    metrics::counter!("fuse1090_queue_drops_total").absolute(reg.queue_drops.load(Ordering::Relaxed));
+    for (r, c) in reg.receivers.read().expect("registry").iter() {
+        let id = r.id.clone();
+        metrics::counter!("fuse1090_receiver_frames_total", "receiver" => id.clone())
+            .absolute(c.frames.load(Ordering::Relaxed));
+        metrics::counter!("fuse1090_receiver_input_errors_total", "receiver" => id.clone())
+            .absolute(c.input_errors.load(Ordering::Relaxed));
+        metrics::counter!("fuse1090_receiver_throttled_total", "receiver" => id)
+            .absolute(c.throttled.load(Ordering::Relaxed));
+    }
+    let f = core.fuser().stats();
+    metrics::counter!("fuse1090_tracks_published_total").absolute(f.published);
+    metrics::counter!("fuse1090_adsb_suspect_flags_total").absolute(f.suspect_flags);
+    metrics::counter!("fuse1090_output_errors_total").absolute(outputs.dests.iter().map(|d| d.errors).sum());
+}

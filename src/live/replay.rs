@@ -1,0 +1,171 @@
+//! `fuse1090 replay`: a capture's receivers played to a running daemon over
+//! real sockets, one connection per receiver, in real time (or faster).
+//!
+//! Each receiver is reached the way the daemon's configuration expects it:
+//! for a `beast_tcp_client` input we are the receiver's Beast port (we
+//! listen, the daemon connects); for a `beast_tcp_server` input we connect
+//! from the receiver's configured source address; for `udp` we send
+//! datagrams from that address. GPS timestamps are moved to today, so the
+//! daemon sees current times; free-running counters need no change.
+
+use std::collections::HashMap;
+use std::fs::File;
+use std::io::BufReader;
+use std::net::SocketAddr;
+use std::path::Path;
+use std::time::Duration;
+
+use anyhow::{bail, Context, Result};
+use tokio::io::AsyncWriteExt;
+use tokio::net::{TcpListener, TcpSocket, UdpSocket};
+
+use super::config::InputKind;
+use super::unix_now;
+use crate::config::Config;
+use crate::feed::beast;
+use crate::feed::capture::{CaptureReader, CaptureRecord, ClockKind};
+use crate::feed::RawFrame;
+
+/// How one receiver reaches the daemon.
+#[derive(Clone, Copy, Debug)]
+enum Route {
+    /// We listen here; the daemon connects.
+    Serve(SocketAddr),
+    /// We connect here, from this local address.
+    Connect(SocketAddr, Option<std::net::IpAddr>),
+    /// Datagrams to here, from this local address.
+    Datagram(SocketAddr, Option<std::net::IpAddr>),
+}
+
+fn route(cfg: &Config, id: &str) -> Option<Route> {
+    let r = cfg.receiver.iter().find(|r| r.id == id)?;
+    for input in cfg.input.iter().filter(|i| i.takes(r)) {
+        let target = match input.address.ip() {
+            ip if ip.is_unspecified() => SocketAddr::new([127, 0, 0, 1].into(), input.address.port()),
+            _ => input.address,
+        };
+        match input.kind {
+            InputKind::BeastTcpClient => return Some(Route::Serve(input.address)),
+            InputKind::BeastTcpServer => return Some(Route::Connect(target, r.source)),
+            InputKind::Udp if input.format == "beast" => return Some(Route::Datagram(target, r.source)),
+            InputKind::Udp => {}
+        }
+    }
+    None
+}
+
+/// Plays the capture; returns the number of frames sent.
+pub async fn replay(capture: &Path, cfg: &Config, speed: f64) -> Result<u64> {
+    let file = File::open(capture).with_context(|| format!("cannot open {}", capture.display()))?;
+    let mut reader = CaptureReader::new(BufReader::new(file), capture.display().to_string());
+    let mut per_rx: HashMap<usize, Vec<(f64, RawFrame)>> = HashMap::new();
+    while let Some(rec) = reader.next_record()? {
+        if let CaptureRecord::Frame(f) = rec {
+            per_rx.entry(f.rx).or_default().push((f.arrival, f.frame));
+        }
+    }
+    let decls = reader.receivers().to_vec();
+    let first = per_rx.values().flat_map(|v| v.iter().map(|f| f.0)).fold(f64::INFINITY, f64::min);
+    if !first.is_finite() {
+        bail!("{}: no frames", capture.display());
+    }
+    let start = unix_now() + 0.2;
+    let shift = start - first;
+    let mut tasks = Vec::new();
+    for (rx, frames) in per_rx {
+        let decl = &decls[rx];
+        let Some(route) = route(cfg, &decl.id) else {
+            tracing::warn!(
+                receiver = decl.id,
+                "replay: no input of the configuration takes this receiver; skipped"
+            );
+            continue;
+        };
+        let gps = decl.clock == ClockKind::Gps;
+        let id = decl.id.clone();
+        tasks.push(tokio::spawn(async move {
+            let r = play(route, frames, gps, start, first, shift, speed).await;
+            if let Err(e) = &r {
+                tracing::error!(receiver = id, "replay: {e:#}");
+            }
+            r.unwrap_or(0)
+        }));
+    }
+    let mut sent = 0;
+    for t in tasks {
+        sent += t.await.unwrap_or(0);
+    }
+    Ok(sent)
+}
+
+enum Sink {
+    Tcp(tokio::net::TcpStream),
+    Udp(UdpSocket, SocketAddr),
+}
+
+async fn play(
+    route: Route,
+    frames: Vec<(f64, RawFrame)>,
+    gps: bool,
+    start: f64,
+    first: f64,
+    shift: f64,
+    speed: f64,
+) -> Result<u64> {
+    let mut sink = match route {
+        Route::Serve(addr) => {
+            let l = TcpListener::bind(addr).await.with_context(|| format!("listen {addr}"))?;
+            let (s, _) = l.accept().await?;
+            Sink::Tcp(s)
+        }
+        Route::Connect(addr, src) => {
+            let s = if addr.is_ipv4() { TcpSocket::new_v4()? } else { TcpSocket::new_v6()? };
+            if let Some(ip) = src {
+                s.bind(SocketAddr::new(ip, 0)).with_context(|| format!("bind {ip}"))?;
+            }
+            Sink::Tcp(s.connect(addr).await.with_context(|| format!("connect {addr}"))?)
+        }
+        Route::Datagram(addr, src) => {
+            let local = SocketAddr::new(
+                src.unwrap_or(if addr.is_ipv4() { [0, 0, 0, 0].into() } else { [0u16; 8].into() }),
+                0,
+            );
+            Sink::Udp(UdpSocket::bind(local).await?, addr)
+        }
+    };
+    let mut sent = 0u64;
+    let mut buf = Vec::with_capacity(64 * 1024);
+    let mut i = 0;
+    while i < frames.len() {
+        let due = start + (frames[i].0 - first) / speed;
+        let wait = due - unix_now();
+        if wait > 0.0 {
+            tokio::time::sleep(Duration::from_secs_f64(wait)).await;
+        }
+        // Everything due by now, in one write (a datagram: up to 1,400 bytes).
+        let now = unix_now();
+        buf.clear();
+        while i < frames.len() && start + (frames[i].0 - first) / speed <= now {
+            let (arrival, mut f) = frames[i];
+            if gps && f.has_timing() {
+                f.timestamp = ClockKind::gps_timestamp(ClockKind::gps_unix(f.timestamp, arrival) + shift);
+            }
+            beast::encode(&f, &mut buf);
+            i += 1;
+            sent += 1;
+            if matches!(sink, Sink::Udp(..)) && buf.len() > 1_400 {
+                break;
+            }
+        }
+        match &mut sink {
+            Sink::Tcp(s) => s.write_all(&buf).await?,
+            Sink::Udp(s, addr) => {
+                s.send_to(&buf, *addr).await?;
+            }
+        }
+    }
+    if let Sink::Tcp(mut s) = sink {
+        let _ = s.shutdown().await;
+    }
+    Ok(sent)
+}

@@ -1,0 +1,342 @@
+//! The service end to end over real loopback sockets: the daemon as a child
+//! process, a shortened tma-busy replayed into it through all three input
+//! kinds (four receivers each: Beast TCP client, Beast TCP server, UDP), two
+//! subscribers (JSON and ASTERIX CAT062), and the faults an operator meets:
+//! an unknown sender, garbage and a half frame on a socket, an unreachable
+//! subscriber, a receiver whose stream ends (and the client reconnecting),
+//! SIGHUP with a changed output list, SIGTERM.
+//!
+//! The ASTERIX output is decoded by an independent decoder (the
+//! `asterix_decoder` Python package, which `.ci/run` installs in `.venv`)
+//! and compared with the JSON output: same positions, addresses and track
+//! numbers.
+
+use std::collections::{HashMap, HashSet};
+use std::io::{Read, Write};
+use std::net::{TcpListener, TcpStream, UdpSocket};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use fuse1090::feed::capture::{CaptureReader, ClockKind};
+use fuse1090::sim::scenario::Scenario;
+use serde_json::Value;
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_fuse1090"))
+}
+
+fn signal(child: &Child, sig: &str) {
+    assert!(Command::new("kill").args(["-s", sig, &child.id().to_string()]).status().unwrap().success());
+}
+
+/// Datagrams received on a socket until `until`.
+fn collect(sock: &UdpSocket, until: Instant, out: &mut Vec<Vec<u8>>) {
+    let mut buf = vec![0u8; 65_536];
+    while Instant::now() < until {
+        sock.set_read_timeout(Some(Duration::from_millis(50))).unwrap();
+        if let Ok((n, _)) = sock.recv_from(&mut buf) {
+            out.push(buf[..n].to_vec());
+        }
+    }
+}
+
+struct World {
+    dir: PathBuf,
+    capture: PathBuf,
+    truth: Vec<Value>,
+    receivers: Vec<(String, f64, f64, f64, ClockKind)>,
+}
+
+fn world() -> World {
+    let dir = std::env::temp_dir().join(format!("fuse1090-e2e-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut s = Scenario::load(&root().join("fixtures/scenarios/tma-busy.toml")).unwrap();
+    s.duration_s = 30.0;
+    let (mut cap, mut truth) = (Vec::new(), Vec::new());
+    fuse1090::sim::simulate(&s, &mut cap, &mut truth).unwrap();
+    let capture = dir.join("capture.txt");
+    std::fs::write(&capture, &cap).unwrap();
+    let mut reader = CaptureReader::new(cap.as_slice(), "capture");
+    while reader.next_record().unwrap().is_some() {}
+    let receivers = reader.receivers().iter().map(|r| (r.id.clone(), r.lat, r.lon, r.alt, r.clock)).collect();
+    let truth = String::from_utf8(truth).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    World { dir, capture, truth, receivers }
+}
+
+/// The daemon's configuration: receivers 0-3 by TCP client, 4-7 pushing to
+/// the TCP server from 127.0.1.x, the rest by UDP from 127.0.2.x.
+fn config(w: &World, ports: &[u16], outputs: &[(u16, &str)]) -> String {
+    let (server, udp) = (ports[0], ports[1]);
+    let mut c = format!(
+        "[service]\nstats_interval_s = 1.0\nrecord = \"{}\"\n\n",
+        w.dir.join("recorded.txt").display()
+    );
+    for (i, (id, lat, lon, alt, clock)) in w.receivers.iter().enumerate() {
+        let clock = if *clock == ClockKind::Gps { "gps" } else { "beast12" };
+        c += &format!(
+            "[[receiver]]\nid = \"{id}\"\nlat = {lat}\nlon = {lon}\nalt_m = {alt}\nclock = \"{clock}\"\n"
+        );
+        match i {
+            0..=3 => {}
+            4..=7 => c += &format!("source = \"127.0.1.{i}\"\n"),
+            _ => c += &format!("source = \"127.0.2.{i}\"\n"),
+        }
+        c += "\n";
+    }
+    for (i, (id, ..)) in w.receivers.iter().enumerate().take(4) {
+        c += &format!(
+            "[[input]]\nkind = \"beast_tcp_client\"\naddress = \"127.0.0.1:{}\"\nreceiver = \"{id}\"\n\n",
+            ports[2 + i]
+        );
+    }
+    let names = |r: std::ops::Range<usize>| {
+        w.receivers[r].iter().map(|(id, ..)| format!("\"{id}\"")).collect::<Vec<_>>().join(", ")
+    };
+    c += &format!(
+        "[[input]]\nkind = \"beast_tcp_server\"\naddress = \"127.0.0.1:{server}\"\nreceivers = [{}]\n\n",
+        names(4..8)
+    );
+    c += &format!(
+        "[[input]]\nkind = \"udp\"\naddress = \"127.0.0.1:{udp}\"\nreceivers = [{}]\n\n",
+        names(8..w.receivers.len())
+    );
+    for (port, format) in outputs {
+        c +=
+            &format!("[[output]]\nkind = \"udp\"\naddress = \"127.0.0.1:{port}\"\nformat = \"{format}\"\n\n");
+    }
+    c
+}
+
+/// The Python with `asterix_decoder`, or `None` (with a message).
+fn python() -> Option<PathBuf> {
+    let candidates =
+        [std::env::var("FUSE1090_PYTHON").ok().map(PathBuf::from), Some(root().join(".venv/bin/python"))];
+    for p in candidates.into_iter().flatten() {
+        if Command::new(&p).args(["-c", "import asterix"]).output().is_ok_and(|o| o.status.success()) {
+            return Some(p);
+        }
+    }
+    eprintln!(
+        "SKIP: no Python with asterix_decoder (.ci/run installs it in .venv); ASTERIX not cross-checked"
+    );
+    None
+}
+
+/// Decodes data blocks with asterix_decoder: (track number, address, lat, lon, time of day).
+fn decode_asterix(py: &Path, blocks: &[Vec<u8>], dir: &Path) -> Vec<(u64, String, f64, f64, f64)> {
+    let input = dir.join("blocks.hex");
+    std::fs::write(
+        &input,
+        blocks
+            .iter()
+            .map(|b| b.iter().map(|x| format!("{x:02x}")).collect::<String>() + "\n")
+            .collect::<String>(),
+    )
+    .unwrap();
+    let script = r#"
+import asterix, json, sys
+for line in open(sys.argv[1]):
+    for r in asterix.parse(bytes.fromhex(line.strip())):
+        print(json.dumps([r["I040"]["TrkN"]["val"], r["I380"]["ADR"]["ADR"]["val"],
+                          r["I105"]["Lat"]["val"], r["I105"]["Lon"]["val"], r["I070"]["ToT"]["val"]]))
+"#;
+    let out = Command::new(py).args(["-c", script]).arg(&input).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| {
+            let v: Value = serde_json::from_str(l).unwrap();
+            (
+                v[0].as_u64().unwrap(),
+                v[1].as_str().unwrap().to_string(),
+                v[2].as_f64().unwrap(),
+                v[3].as_f64().unwrap(),
+                v[4].as_f64().unwrap(),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn daemon_end_to_end_over_loopback_with_faults() {
+    let w = world();
+    let ports: Vec<u16> = (0..6).map(|_| free_port()).collect();
+    let json_sub = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let ax_sub = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let late_sub = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let (jp, ap, lp) = (
+        json_sub.local_addr().unwrap().port(),
+        ax_sub.local_addr().unwrap().port(),
+        late_sub.local_addr().unwrap().port(),
+    );
+    // An unreachable subscriber first: it must not stop the others.
+    let dead = free_port();
+    let cfg_path = w.dir.join("fuse1090.toml");
+    std::fs::write(&cfg_path, config(&w, &ports, &[(dead, "json"), (jp, "json"), (ap, "asterix062")]))
+        .unwrap();
+    let out = bin().arg("check-config").arg(&cfg_path).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+
+    let log = std::fs::File::create(w.dir.join("daemon.log")).unwrap();
+    let mut daemon = bin()
+        .args(["run", "--config"])
+        .arg(&cfg_path)
+        .env("RUST_LOG", "info")
+        .stderr(Stdio::from(log))
+        .stdout(Stdio::null())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(400));
+
+    // Faults on the TCP server: an unknown sender, garbage and a half frame
+    // from a known one (127.0.1.4 is receiver 4).
+    let server = format!("127.0.0.1:{}", ports[0]);
+    if let Ok(mut s) = TcpStream::connect(&server) {
+        let _ = s.write_all(b"hello from nowhere");
+    }
+    let garbage = {
+        let sock = socket2::Socket::new(socket2::Domain::IPV4, socket2::Type::STREAM, None).unwrap();
+        sock.bind(&"127.0.1.4:0".parse::<std::net::SocketAddr>().unwrap().into()).unwrap();
+        sock.connect(&server.parse::<std::net::SocketAddr>().unwrap().into()).unwrap();
+        let mut s: TcpStream = sock.into();
+        s.write_all(&[0x00, 0xff, 0x1a, 0x1a, 0x1a, 0x33, 0x01, 0x02]).unwrap();
+        s
+    };
+    drop(garbage);
+
+    let replay = bin()
+        .arg("replay")
+        .arg(&w.capture)
+        .arg("--config")
+        .arg(&cfg_path)
+        .args(["--speed", "3"])
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (mut json_dg, mut ax_dg, mut late_dg) = (Vec::new(), Vec::new(), Vec::new());
+    let halfway = Instant::now() + Duration::from_secs(5);
+    std::thread::scope(|s| {
+        s.spawn(|| collect(&json_sub, halfway, &mut json_dg));
+        s.spawn(|| collect(&ax_sub, halfway, &mut ax_dg));
+    });
+    // SIGHUP with a new output list: the late subscriber joins, the dead one goes.
+    std::fs::write(&cfg_path, config(&w, &ports, &[(jp, "json"), (ap, "asterix062"), (lp, "json")])).unwrap();
+    signal(&daemon, "HUP");
+    let end = Instant::now() + Duration::from_secs(8);
+    std::thread::scope(|s| {
+        s.spawn(|| collect(&json_sub, end, &mut json_dg));
+        s.spawn(|| collect(&ax_sub, end, &mut ax_dg));
+        s.spawn(|| collect(&late_sub, end, &mut late_dg));
+    });
+    let replay_out = replay.wait_with_output().unwrap();
+    assert!(replay_out.status.success(), "{}", String::from_utf8_lossy(&replay_out.stderr));
+
+    // SIGTERM: gone within two seconds, cleanly.
+    signal(&daemon, "TERM");
+    let t0 = Instant::now();
+    let status = loop {
+        if let Some(s) = daemon.try_wait().unwrap() {
+            break s;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(2), "still running 2 s after SIGTERM");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert!(status.success(), "{status}");
+    let mut log = String::new();
+    std::fs::File::open(w.dir.join("daemon.log")).unwrap().read_to_string(&mut log).unwrap();
+
+    // The operator sees every event in the log.
+    for needle in
+        ["unknown sender refused", "SIGHUP: configuration re-read", "disconnected", "stopping", "stats:"]
+    {
+        assert!(log.contains(needle), "log lacks {needle:?}:\n{}", &log[log.len().saturating_sub(3000)..]);
+    }
+    // Tracks for the aircraft of the truth, through every input kind.
+    let records: Vec<Value> = json_dg.iter().map(|d| serde_json::from_slice(d).unwrap()).collect();
+    let tracked: HashSet<String> = records
+        .iter()
+        .filter(|r| r["type"] == "track")
+        .map(|r| r["hex"].as_str().unwrap().to_string())
+        .collect();
+    let flying: HashSet<String> = w
+        .truth
+        .iter()
+        .filter(|t| t["type"] == "equipage")
+        .map(|t| t["hex"].as_str().unwrap().to_string())
+        .collect();
+    let share = tracked.intersection(&flying).count() as f64 / flying.len() as f64;
+    eprintln!(
+        "{} JSON datagrams, {} ASTERIX blocks, {} after SIGHUP on the new output; {}/{} aircraft tracked",
+        json_dg.len(),
+        ax_dg.len(),
+        late_dg.len(),
+        tracked.len(),
+        flying.len()
+    );
+    assert!(share > 0.8, "tracked {share:.2} of the aircraft");
+    assert!(tracked.is_subset(&flying), "tracks for aircraft that do not exist");
+    assert!(records.iter().any(|r| r["type"] == "mlat"), "no MLAT fixes");
+    assert!(!late_dg.is_empty(), "the output added by SIGHUP got nothing");
+    let mut used: HashSet<String> = HashSet::new();
+    for r in records.iter().filter(|r| r["type"] == "mlat") {
+        for id in r["receivers"].as_array().unwrap() {
+            used.insert(id.as_str().unwrap().to_string());
+        }
+    }
+    for (i, (id, ..)) in w.receivers.iter().enumerate() {
+        if [0, 5, 9].contains(&i) {
+            assert!(used.contains(id), "receiver {id} (input kind {}) never used", i / 4);
+        }
+    }
+
+    // The recording (`record`) is a capture of what came in: every receiver,
+    // every frame the replay sent (less the garbage), and it runs offline.
+    let sent: u64 = String::from_utf8_lossy(&replay_out.stderr)
+        .split_whitespace()
+        .skip_while(|w| *w != "replay:")
+        .nth(1)
+        .and_then(|n| n.parse().ok())
+        .expect("replay prints what it sent");
+    let recorded = std::fs::read(w.dir.join("recorded.txt")).unwrap();
+    let mut reader = CaptureReader::new(recorded.as_slice(), "recorded");
+    let mut frames = 0u64;
+    while let Some(r) = reader.next_record().unwrap() {
+        frames += matches!(r, fuse1090::feed::capture::CaptureRecord::Frame(_)) as u64;
+    }
+    assert_eq!(reader.receivers().len(), w.receivers.len());
+    assert_eq!(reader.skipped, 0);
+    assert!(frames >= sent && frames <= sent + 10, "recorded {frames} of {sent} frames sent");
+
+    // ASTERIX against JSON: same track numbers, addresses and positions.
+    let Some(py) = python() else { return };
+    let decoded = decode_asterix(&py, &ax_dg, &w.dir);
+    assert!(decoded.len() > 100, "{} ASTERIX records", decoded.len());
+    let by_key: HashMap<(u64, String), Vec<&Value>> =
+        records.iter().filter(|r| r["type"] == "track").fold(HashMap::new(), |mut m, r| {
+            m.entry((r["id"].as_u64().unwrap(), r["hex"].as_str().unwrap().to_string())).or_default().push(r);
+            m
+        });
+    let mut matched = 0;
+    for (tn, adr, lat, lon, tod) in &decoded {
+        let js = by_key
+            .get(&(*tn, adr.clone()))
+            .unwrap_or_else(|| panic!("ASTERIX track {tn}/{adr} not in the JSON"));
+        let close = js.iter().find(|r| (r["t"].as_f64().unwrap().rem_euclid(86_400.0) - tod).abs() < 0.01);
+        if let Some(r) = close {
+            let (jl, jo) = (r["lat"].as_f64().unwrap(), r["lon"].as_f64().unwrap());
+            assert!((jl - lat).abs() < 1e-5 && (jo - lon).abs() < 1e-5, "{tn}: {lat},{lon} vs {jl},{jo}");
+            matched += 1;
+        }
+    }
+    assert!(matched as f64 > 0.9 * decoded.len() as f64, "{matched} of {} matched", decoded.len());
+}
