@@ -260,7 +260,7 @@ impl Core {
             },
         };
         let mut reports = Vec::new();
-        if let Some((lat, lon, sigma)) = g.info.report {
+        if let (Some((lat, lon, sigma)), true) = (g.info.report, fix.dof >= 1 && fix.chi2 <= 3.0) {
             // The same transmission's ADS-B position against its fix.
             let p = crate::track::plane::Plane::new(lat, lon, 0.0);
             let d = p.to_en(fix.lat, fix.lon);

@@ -186,11 +186,14 @@ pub struct Fuser {
     next_conflict: f64,
     conflicts: HashMap<(u32, u32), conflict::Conflict>,
     pub publish_source_tracks: bool,
+    /// Single-source tracks are kept (track-to-track fusion, or published).
+    singles: bool,
     stats: FuseStats,
 }
 
 impl Fuser {
     pub fn new(cfg: FuseConfig, tcfg: TrackConfig, publish_source_tracks: bool) -> Fuser {
+        let singles = cfg.method != Method::Measurement || publish_source_tracks;
         let spec = tcfg.imm_spec();
         Fuser {
             cfg,
@@ -202,6 +205,7 @@ impl Fuser {
             next_sweep: f64::NEG_INFINITY,
             next_conflict: f64::NEG_INFINITY,
             conflicts: HashMap::new(),
+            singles,
             publish_source_tracks,
             stats: FuseStats::default(),
         }
@@ -332,8 +336,16 @@ impl Fuser {
             self.stats.suspect_excluded += 1;
             Outcome::Early
         };
-        let single = a.single[m.source as usize].apply(m);
-        if a.single[0].keep_gain {
+        // Single-source tracks cost as much as the fused one: run only when
+        // a track-to-track method or their publication needs them.
+        let single = if self.singles {
+            a.single[m.source as usize].apply(m)
+        } else if into_fused {
+            outcome
+        } else {
+            Outcome::Applied { nis: 0.0 }
+        };
+        if self.singles && a.single[0].keep_gain {
             let model = self.spec.models[0];
             let f_q = |dt: f64| model.transition(dt);
             match (single, a.single[m.source as usize].gain) {

@@ -63,8 +63,11 @@ impl Imm {
         combine(&self.filters, &self.mu)
     }
 
-    /// Mixing probabilities' normalisers `c` and each model's mixed prediction over `dt`.
-    fn mixed_predictions(&self, dt: f64) -> (Vec<f64>, Vec<Gaussian>) {
+    /// Mixing and model-matched prediction over `dt`: everything of a step
+    /// that does not depend on the measurement, so a caller can gate on the
+    /// combined prediction and try several noise levels (VB) without
+    /// predicting again.
+    pub fn prepare(&self, dt: f64) -> Prepared {
         let (n, tr) = (self.spec.models.len(), &self.spec.transition);
         let c: Vec<f64> = (0..n).map(|j| (0..n).map(|i| tr[(i, j)] * self.mu[i]).sum()).collect();
         let predicted = c
@@ -78,7 +81,7 @@ impl Imm {
                 mixed.predict(&f, &q)
             })
             .collect();
-        (c, predicted)
+        Prepared { c, predicted }
     }
 
     /// The combined prediction over `dt`, without changing the filter.
@@ -86,8 +89,7 @@ impl Imm {
         if dt == 0.0 {
             return self.estimate();
         }
-        let (c, predicted) = self.mixed_predictions(dt);
-        combine(&predicted, &c)
+        self.prepare(dt).combined()
     }
 
     /// Predicts over `dt` and updates with a position `m`.
@@ -98,12 +100,18 @@ impl Imm {
     /// Predicts over `dt` and updates with `m`. `None` (and no change) when a
     /// model's update is numerically impossible: the caller resets the track.
     pub fn step_linear<const M: usize>(&mut self, dt: f64, m: &Linear<M>) -> Option<Step> {
+        let p = self.prepare(dt);
+        self.update(&p, m)
+    }
+
+    /// The update half of a step, from a preparation of this filter. The
+    /// result depends only on `p` and `m`, so calling it again with another
+    /// `m` replaces the previous update.
+    pub fn update<const M: usize>(&mut self, p: &Prepared, m: &Linear<M>) -> Option<Step> {
         let n = self.spec.models.len();
-        let (c, predicted) = self.mixed_predictions(dt);
-        // Model-matched update.
         let mut post = Vec::with_capacity(n);
         let mut lik = Vec::with_capacity(n);
-        for (pred, cj) in predicted.iter().zip(&c) {
+        for (pred, cj) in p.predicted.iter().zip(&p.c) {
             let u = pred.update_linear(m)?;
             post.push(u.post);
             lik.push(u.log_likelihood + cj.max(1e-300).ln());
@@ -118,12 +126,31 @@ impl Imm {
         let total: f64 = w.iter().sum();
         let mu: Vec<f64> = w.iter().map(|x| x / total).collect();
         // NIS of the combined prediction (the track's own consistency check).
-        let pred = combine(&predicted, &c);
-        let nis = pred.update_linear(m).map_or(f64::INFINITY, |u| u.nis);
+        let nis = {
+            let (nu, s) = p.combined().innovation(m);
+            s.cholesky().map_or(f64::INFINITY, |c| nu.dot(&c.solve(&nu)))
+        };
+        let estimate = combine(&post, &mu);
+        if !estimate.healthy() {
+            return None;
+        }
         self.filters = post;
         self.mu = mu;
-        let estimate = self.estimate();
-        estimate.healthy().then_some(Step { estimate, nis })
+        Some(Step { estimate, nis })
+    }
+}
+
+/// A step's measurement-independent half (see [`Imm::prepare`]).
+#[derive(Clone, Debug)]
+pub struct Prepared {
+    c: Vec<f64>,
+    predicted: Vec<Gaussian>,
+}
+
+impl Prepared {
+    /// The moment-matched combined prediction.
+    pub fn combined(&self) -> Gaussian {
+        combine(&self.predicted, &self.c)
     }
 }
 

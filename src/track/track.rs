@@ -353,31 +353,33 @@ impl Track {
                     self.vertical(m.t, 1, c, var);
                 }
                 let gate = self.gate;
+                let vm = kf::velocity(v_en, cov);
                 match &mut self.state.imm {
                     None => Outcome::Early,
-                    // A velocity far outside the track's own: left out, not applied.
-                    Some(imm)
-                        if {
-                            let (nu, s) = imm.predicted(dt).innovation(&kf::velocity(v_en, cov));
+                    Some(imm) => match imm.prepare(dt) {
+                        // A velocity far outside the track's own: left out, not applied.
+                        prep if {
+                            let (nu, s) = prep.combined().innovation(&vm);
                             s.try_inverse().is_none_or(|si| (nu.transpose() * si * nu)[0] > gate)
                         } =>
-                    {
-                        Outcome::Gated
-                    }
-                    Some(imm) => match (imm.predicted(dt), imm.step_linear(dt, &kf::velocity(v_en, cov))) {
-                        (pred, Some(step)) => {
-                            if self.keep_gain {
-                                self.gain = gain(&pred, &step.estimate).map(|a| (m.t, a));
+                        {
+                            Outcome::Gated
+                        }
+                        prep => match (prep.combined(), imm.update(&prep, &vm)) {
+                            (pred, Some(step)) => {
+                                if self.keep_gain {
+                                    self.gain = gain(&pred, &step.estimate).map(|a| (m.t, a));
+                                }
+                                Outcome::Applied { nis: 0.0 }
                             }
-                            Outcome::Applied { nis: 0.0 }
-                        }
-                        (_, None) => {
-                            tracing::warn!("track filter went numerically bad on a velocity; restarting");
-                            self.state.imm = None;
-                            self.state.plane = None;
-                            self.restarts += 1;
-                            Outcome::Restarted
-                        }
+                            (_, None) => {
+                                tracing::warn!("track filter went numerically bad on a velocity; restarting");
+                                self.state.imm = None;
+                                self.state.plane = None;
+                                self.restarts += 1;
+                                Outcome::Restarted
+                            }
+                        },
                     },
                 }
             }
@@ -436,7 +438,8 @@ impl Track {
             return Outcome::Applied { nis: 0.0 };
         };
         let z = Vector2::from(plane.to_en(lat, lon));
-        let pred = imm.predicted(dt);
+        let prep = imm.prepare(dt);
+        let pred = prep.combined();
         // The report's time error moves it along the velocity.
         let v = pred.x.fixed_rows::<2>(2).into_owned();
         let nominal = cov_en + v * v.transpose() * (time_sigma_s * time_sigma_s);
@@ -474,14 +477,13 @@ impl Track {
             return Outcome::Gated;
         }
         self.state.gated_in_a_row = 0;
-        let saved = imm.clone();
         let (alpha0, beta0) = (vb.alpha + 1.0, vb.beta);
         let mut scale = vb.scale();
         let mut done = None;
-        // Fixed-point iterations of the VB update (one without VB).
+        // Fixed-point iterations of the VB update (one without VB); each
+        // update replaces the previous one, from the same prediction.
         for _ in 0..if self.cfg.vb { 3 } else { 1 } {
-            *imm = saved.clone();
-            let Some(step) = imm.step_linear(dt, &linear(scale)) else {
+            let Some(step) = imm.update(&prep, &linear(scale)) else {
                 break;
             };
             done = Some(step);
