@@ -1,5 +1,8 @@
 //! Tracking costs: one IMM step (3 models: CV and a left/right coordinated
-//! turn; and 4 with constant acceleration) with a position update.
+//! turn; and 4 with constant acceleration) with a position update; and the
+//! whole per-aircraft tracker (default configuration: IMM with VB noise,
+//! in-order history, publication) over 1,000 aircraft, as measurements and
+//! tracks per second.
 //!
 //! Run: `cargo bench --bench track`.
 
@@ -43,6 +46,50 @@ fn bench(c: &mut Criterion) {
             )
         });
     }
+    g.finish();
+
+    // The full tracker: 1,000 aircraft, one ADS-B position each per step.
+    use fuse1090::fuse::{FuseConfig, Fuser};
+    use fuse1090::track::{Measurement, Observation, Source, TrackConfig};
+    let mut g = c.benchmark_group("fuser");
+    let aircraft = 1000u32;
+    let steps = 20;
+    g.throughput(Throughput::Elements((aircraft * steps) as u64));
+    g.bench_function("adsb_positions_1000_aircraft", |b| {
+        b.iter_batched(
+            || Fuser::new(FuseConfig::default(), TrackConfig::default(), false),
+            |mut f| {
+                let mut out = Vec::new();
+                for k in 0..steps {
+                    let t = 1000.0 + k as f64 * 0.5;
+                    for a in 0..aircraft {
+                        let (lat, lon, _) = fuse1090::geo::displace(
+                            40.0 + (a % 40) as f64 * 0.1,
+                            (a / 40) as f64 * 0.1,
+                            9000.0,
+                            [100.0 * t, 50.0 * t, 0.0],
+                        );
+                        let m = Measurement {
+                            t,
+                            source: Source::Adsb,
+                            obs: Observation::Position {
+                                lat,
+                                lon,
+                                cov_en: Matrix2::identity() * 400.0,
+                                height: Some((9000.0, 64.0)),
+                                time_sigma_s: 0.01,
+                                surface: false,
+                            },
+                        };
+                        f.on_measurement(0x400000 + a, Some(8), m, t, &mut out);
+                    }
+                    out.clear();
+                }
+                f
+            },
+            criterion::BatchSize::SmallInput,
+        )
+    });
     g.finish();
 }
 

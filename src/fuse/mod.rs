@@ -421,6 +421,14 @@ impl Fuser {
         a.motion_state = a.motion.push(Fix2 { pos: Vector2::new(en[0], en[1]), cov });
     }
 
+    /// The variational-Bayes noise scale of a source's measurements of an
+    /// aircraft (1: as good as they claim): from its single-source track when
+    /// those are kept, else from the fused track.
+    pub fn vb_scale(&self, addr: u32, source: Source) -> Option<f64> {
+        let a = self.aircraft.get(&addr)?;
+        Some(if self.singles { a.single[source as usize].vb_scale(source) } else { a.fused.vb_scale(source) })
+    }
+
     /// Whether the conformance monitor distrusts an aircraft's ADS-B.
     pub fn is_suspect(&self, addr: u32) -> bool {
         self.aircraft.get(&addr).is_some_and(|a| a.adsb_suspect)
@@ -635,5 +643,66 @@ impl Aircraft {
         } else {
             cfg.period_s(self.nac_p)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pos(t: f64, lat: f64, lon: f64) -> Measurement {
+        Measurement {
+            t,
+            source: Source::Adsb,
+            obs: Observation::Position {
+                lat,
+                lon,
+                cov_en: Matrix2::identity() * 100.0,
+                height: Some((3000.0, 100.0)),
+                time_sigma_s: 0.0,
+                surface: false,
+            },
+        }
+    }
+
+    #[test]
+    fn impossible_measurements_are_rejected_and_counted() {
+        let mut f = Fuser::new(FuseConfig::default(), TrackConfig::default(), false);
+        let mut out = Vec::new();
+        f.on_measurement(1, Some(8), pos(100.0, f64::NAN, 5.0), 100.0, &mut out);
+        f.on_measurement(1, Some(8), pos(100.0, 45.0, 5.0), 200.0, &mut out);
+        let fast = Measurement {
+            t: 100.0,
+            source: Source::Adsb,
+            obs: Observation::Velocity {
+                v_en: Vector2::new(1300.0, 0.0),
+                cov: Matrix2::identity(),
+                climb: None,
+            },
+        };
+        f.on_measurement(1, Some(8), fast, 100.0, &mut out);
+        let bad_cov = Measurement {
+            obs: Observation::Position {
+                lat: 45.0,
+                lon: 5.0,
+                cov_en: -Matrix2::identity(),
+                height: None,
+                time_sigma_s: 0.0,
+                surface: false,
+            },
+            ..pos(100.0, 45.0, 5.0)
+        };
+        f.on_measurement(1, Some(8), bad_cov, 100.0, &mut out);
+        let s = f.stats();
+        assert_eq!((s.rejected_non_finite, s.rejected_time, s.rejected_speed), (2, 1, 1));
+        assert_eq!(f.tracks(), 0);
+        assert!(out.is_empty());
+        // Good ones make a confirmed, published track.
+        for k in 0..5 {
+            let t = 100.0 + k as f64;
+            let (lat, lon, _) = crate::geo::displace(45.0, 5.0, 3000.0, [200.0 * k as f64, 0.0, 0.0]);
+            f.on_measurement(1, Some(8), pos(t, lat, lon), t, &mut out);
+        }
+        assert!(out.iter().any(|o| matches!(o, Output::Track(r) if r.est.state.healthy())));
     }
 }
