@@ -236,6 +236,11 @@ impl Core {
         out: &mut Vec<Event>,
     ) {
         let Some(fix) = mlat.on_group(g, now) else {
+            if let Some(t) = mlat.take_tdoa() {
+                let mut reports = Vec::new();
+                fuser.on_tdoa(&t, now, &mut reports);
+                out.extend(reports.into_iter().map(event));
+            }
             return;
         };
         stats.fixes += 1;

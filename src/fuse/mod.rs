@@ -139,6 +139,8 @@ pub struct FuseStats {
     pub suspect_flags: u64,
     /// ADS-B measurements of flagged aircraft kept out of their fused track.
     pub suspect_excluded: u64,
+    /// Groups too small for a fix given to tracks as time differences.
+    pub tdoa: u64,
     pub conflicts: u64,
 }
 
@@ -256,6 +258,12 @@ impl Fuser {
                         && climb.is_none_or(|(c, v)| c.is_finite() && v > 0.0 && v.is_finite())
                 }
                 Observation::Height { h, var } => h.is_finite() && var > 0.0 && var.is_finite(),
+                Observation::Tdoa { n, sites } => {
+                    (2..=3).contains(&n)
+                        && sites[..n as usize].iter().all(|(p, t, s)| {
+                            p.iter().all(|v| v.is_finite()) && t.is_finite() && *s > 0.0 && s.is_finite()
+                        })
+                }
             };
         if !finite {
             self.stats.rejected_non_finite += 1;
@@ -362,18 +370,18 @@ impl Fuser {
             Outcome::Restarted => self.stats.restarts += 1,
             _ => {}
         }
-        let Observation::Position { lat, lon, cov_en, .. } = m.obs else {
+        if !matches!(m.obs, Observation::Position { .. } | Observation::Tdoa { .. }) {
             return;
-        };
+        }
         if matches!(single, Outcome::Applied { .. } | Outcome::Restarted) {
             a.last_source_t[m.source as usize] = a.last_source_t[m.source as usize].max(m.t);
         }
-        if let Observation::Position { surface, .. } = m.obs {
+        if let Observation::Position { lat, lon, cov_en, surface, .. } = m.obs {
             a.surface = surface;
-        }
-        if m.t - a.motion_t >= self.tcfg.motion_interval_s {
-            a.motion_t = m.t;
-            Self::motion(a, lat, lon, cov_en);
+            if m.t - a.motion_t >= self.tcfg.motion_interval_s {
+                a.motion_t = m.t;
+                Self::motion(a, lat, lon, cov_en);
+            }
         }
         if !matches!(outcome, Outcome::Applied { .. })
             || a.fused.stage != Stage::Confirmed
@@ -427,6 +435,27 @@ impl Fuser {
     pub fn vb_scale(&self, addr: u32, source: Source) -> Option<f64> {
         let a = self.aircraft.get(&addr)?;
         Some(if self.singles { a.single[source as usize].vb_scale(source) } else { a.fused.vb_scale(source) })
+    }
+
+    /// A transmission too few receivers heard for a fix: its time differences
+    /// go into the tracks of an aircraft already tracked (they cannot start one).
+    pub fn on_tdoa(&mut self, g: &crate::mlat::engine::TdoaGroup, now: f64, out: &mut Vec<Output>) {
+        if !self.aircraft.get(&g.addr).is_some_and(|a| a.fused.has_position())
+            || !(2..=3).contains(&g.sites.len())
+        {
+            return;
+        }
+        let mut sites = [([0.0; 3], 0.0, 0.0); 3];
+        for (d, s) in sites.iter_mut().zip(&g.sites) {
+            *d = *s;
+        }
+        let m = Measurement {
+            t: g.t,
+            source: Source::Mlat,
+            obs: Observation::Tdoa { n: g.sites.len() as u8, sites },
+        };
+        self.stats.tdoa += 1;
+        self.on_measurement(g.addr, None, m, now, out);
     }
 
     /// Whether the conformance monitor distrusts an aircraft's ADS-B.

@@ -100,6 +100,17 @@ pub struct MlatFix {
     pub df: u8,
 }
 
+/// A transmission heard by too few synchronised sites for a fix: what the
+/// tracker can still use (time differences against its own estimate).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TdoaGroup {
+    pub addr: u32,
+    /// Approximate time of emission (Unix s): the first arrival.
+    pub t: f64,
+    /// Each site: ECEF position (m), time of arrival in the common clock (s), sigma (s).
+    pub sites: Vec<([f64; 3], f64, f64)>,
+}
+
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct MlatStats {
     pub groups: u64,
@@ -200,9 +211,16 @@ pub struct Mlat {
     /// Nanoseconds since the Unix epoch of the GPS time base's zero.
     gps_epoch_ns: Option<i64>,
     pub stats: MlatStats,
+    /// The last group too small for a fix, for the tracker ([`Mlat::take_tdoa`]).
+    tdoa: Option<TdoaGroup>,
 }
 
 impl Mlat {
+    /// The time differences of the last group that was too small for a fix.
+    pub fn take_tdoa(&mut self) -> Option<TdoaGroup> {
+        self.tdoa.take()
+    }
+
     /// What calibration learnt about receiver `rx`.
     pub fn calibration(&self, rx: usize) -> Calibration {
         self.rxs[rx].cal
@@ -222,6 +240,7 @@ impl Mlat {
             aircraft: HashMap::new(),
             gps_epoch_ns: None,
             stats: MlatStats::default(),
+            tdoa: None,
         }
     }
 
@@ -432,6 +451,16 @@ impl Mlat {
         });
         if ms.len() < 3 || (ms.len() < 4 && alt.is_none()) {
             self.stats.too_few_receivers += 1;
+            // Too few for a fix, enough for a track: the synchronised times
+            // go to the tracker as time differences (two sites or more).
+            if (2..=3).contains(&ms.len()) && info.addr_known {
+                let first = arrivals.iter().cloned().fold(f64::INFINITY, f64::min);
+                self.tdoa = Some(TdoaGroup {
+                    addr: info.addr,
+                    t: first,
+                    sites: ms.iter().map(|m| (m.pos, m.t, m.sigma_t)).collect(),
+                });
+            }
             return None;
         }
         let guess = ac.last_fix.filter(|(_, t)| (now - t).abs() < 30.0).map(|(p, _)| p);

@@ -108,11 +108,29 @@ impl Imm {
     /// result depends only on `p` and `m`, so calling it again with another
     /// `m` replaces the previous update.
     pub fn update<const M: usize>(&mut self, p: &Prepared, m: &Linear<M>) -> Option<Step> {
+        self.update_with(
+            p,
+            |g| g.update_linear(m),
+            |g| {
+                let (nu, s) = g.innovation(m);
+                s.cholesky().map_or(f64::INFINITY, |c| nu.dot(&c.solve(&nu)))
+            },
+        )
+    }
+
+    /// The update half with any measurement: `update` applies it to one
+    /// model's prediction, `nis` scores the combined prediction.
+    pub fn update_with(
+        &mut self,
+        p: &Prepared,
+        update: impl Fn(&Gaussian) -> Option<super::kf::Updated>,
+        nis: impl Fn(&Gaussian) -> f64,
+    ) -> Option<Step> {
         let n = self.spec.models.len();
         let mut post = Vec::with_capacity(n);
         let mut lik = Vec::with_capacity(n);
         for (pred, cj) in p.predicted.iter().zip(&p.c) {
-            let u = pred.update_linear(m)?;
+            let u = update(pred)?;
             post.push(u.post);
             lik.push(u.log_likelihood + cj.max(1e-300).ln());
         }
@@ -126,10 +144,7 @@ impl Imm {
         let total: f64 = w.iter().sum();
         let mu: Vec<f64> = w.iter().map(|x| x / total).collect();
         // NIS of the combined prediction (the track's own consistency check).
-        let nis = {
-            let (nu, s) = p.combined().innovation(m);
-            s.cholesky().map_or(f64::INFINITY, |c| nu.dot(&c.solve(&nu)))
-        };
+        let nis = nis(&p.combined());
         let estimate = combine(&post, &mu);
         if !estimate.healthy() {
             return None;

@@ -15,6 +15,7 @@ pub mod motion;
 pub mod plane;
 #[allow(clippy::module_inception)]
 pub mod track;
+pub mod ukf;
 
 pub use config::{ModelConfig, TrackConfig};
 pub use imm::{Imm, ImmSpec};

@@ -53,6 +53,17 @@ impl Plane {
         (lat, lon)
     }
 
+    /// Plane-local east, north, up (m) of an ECEF point.
+    pub fn ecef_to_local(&self, p: [f64; 3]) -> Vector3<f64> {
+        let d = Vector3::from(p) - self.origin;
+        Vector3::new(d.dot(&self.east), d.dot(&self.north), d.dot(&self.up))
+    }
+
+    /// The local up coordinate of the point at plane position (e, n) and height `h` (m).
+    pub fn up_at(&self, e: f64, n: f64, h: f64) -> f64 {
+        h - self.h - (e * e + n * n) / (2.0 * (EARTH_MEAN_RADIUS_M + self.h))
+    }
+
     /// Rotation taking horizontal vectors of `self` into `other`'s axes.
     pub fn rotation_to(&self, other: &Plane) -> Matrix2<f64> {
         Matrix2::new(

@@ -62,6 +62,9 @@ pub enum Observation {
     Velocity { v_en: Vector2<f64>, cov: Matrix2<f64>, climb: Option<(f64, f64)> },
     /// Height only (m, variance): a Mode S altitude reply.
     Height { h: f64, var: f64 },
+    /// Times of arrival of one transmission at 2 or 3 synchronised sites, too
+    /// few for a fix: ECEF position (m), time in a common clock (s), sigma (s).
+    Tdoa { n: u8, sites: [([f64; 3], f64, f64); 3] },
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -387,6 +390,7 @@ impl Track {
                 self.vertical(m.t, 0, h, var);
                 Outcome::Applied { nis: 0.0 }
             }
+            Observation::Tdoa { n, sites } => self.tdoa(m.t, dt, &sites[..n as usize]),
         };
         // The horizontal filter moved to m.t only if it took the measurement.
         if matches!(outcome, Outcome::Applied { .. } | Outcome::Restarted)
@@ -397,6 +401,40 @@ impl Track {
         }
         self.state.t = m.t;
         outcome
+    }
+
+    /// Time differences straight into the track (augmented UKF), with the
+    /// vertical channel's height: what a transmission heard by too few
+    /// receivers for a fix still says.
+    fn tdoa(&mut self, t: f64, dt: f64, sites: &[([f64; 3], f64, f64)]) -> Outcome {
+        let (Some(plane), Some(imm), Some(v)) =
+            (self.state.plane, self.state.imm.as_mut(), self.state.vertical)
+        else {
+            return Outcome::Early;
+        };
+        let mut v = v;
+        v.predict(t - self.state.t_v, self.cfg.vertical_q);
+        let c = crate::mlat::solver::C_AIR;
+        let m = super::ukf::Tdoa {
+            receivers: sites.iter().map(|s| plane.ecef_to_local(s.0)).collect(),
+            sigma_m: sites.iter().map(|s| s.2 * c).collect(),
+            z: sites[1..].iter().map(|s| (s.1 - sites[0].1) * c).collect(),
+        };
+        let (h, hv) = (v.x[0], v.p[(0, 0)]);
+        let up = |e: f64, n: f64, h: f64| plane.up_at(e, n, h);
+        let prep = imm.prepare(dt);
+        let nis = super::ukf::update(&prep.combined(), h, hv, &m, up).map_or(f64::INFINITY, |u| u.nis);
+        if nis > self.gate {
+            return Outcome::Gated;
+        }
+        match imm.update_with(
+            &prep,
+            |g| super::ukf::update(g, h, hv, &m, up),
+            |g| super::ukf::update(g, h, hv, &m, up).map_or(f64::INFINITY, |u| u.nis),
+        ) {
+            Some(step) => Outcome::Applied { nis: step.nis },
+            None => Outcome::Gated,
+        }
     }
 
     /// A vertical measurement: height (row 0) or climb rate (row 1).
@@ -708,5 +746,66 @@ mod tests {
         // Claimed 10 m, real 100 m: the scale approaches 100.
         let s = tr.vb_scale(Source::Adsb);
         assert!((50.0..200.0).contains(&s), "scale {s}");
+    }
+
+    #[test]
+    fn time_differences_alone_keep_a_track_on_the_truth() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        // Three receivers 30-50 km around; the aircraft flies east at 200 m/s, 3 km up.
+        let rx: Vec<[f64; 3]> = [(45.2, 4.8), (44.8, 5.3), (45.3, 5.5)]
+            .iter()
+            .map(|&(la, lo)| crate::geo::geodetic_to_ecef(la, lo, 200.0))
+            .collect();
+        let noise = Normal::new(0.0, 50e-9).unwrap();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let (mut with, mut without) = (track(), track());
+        for k in 0..10 {
+            let t = k as f64;
+            let (lat, lon) = truth(t);
+            with.apply(pos(t, lat, lon, 30.0));
+            without.apply(pos(t, lat, lon, 30.0));
+        }
+        let (mut worst, mut nees, mut n) = (0.0f64, 0.0, 0);
+        for k in 10..130 {
+            let t = 10.0 + (k - 10) as f64 * 0.5;
+            let (lat, lon) = truth(t);
+            let p = crate::geo::geodetic_to_ecef(lat, lon, 3000.0);
+            let mut sites = [([0.0; 3], 0.0, 0.0); 3];
+            for (i, r) in rx.iter().enumerate() {
+                let toa =
+                    crate::geo::ecef_distance(p, *r) / crate::mlat::solver::C_AIR + noise.sample(&mut rng);
+                sites[i] = (*r, toa, 50e-9);
+            }
+            // The height comes from altitude reports.
+            with.apply(Measurement {
+                t,
+                source: Source::Mlat,
+                obs: Observation::Height { h: 3000.0, var: 100.0 },
+            });
+            let o =
+                with.apply(Measurement { t, source: Source::Mlat, obs: Observation::Tdoa { n: 3, sites } });
+            assert!(matches!(o, Outcome::Applied { .. }), "{o:?} at {t}");
+            let e = with.estimate_at(t).unwrap();
+            let d = crate::geo::distance_m(lat, lon, e.lat, e.lon);
+            worst = worst.max(d);
+            if k >= 30 {
+                let en = e.plane.to_en(lat, lon);
+                let err = nalgebra::Vector2::new(e.state.x[0] - en[0], e.state.x[1] - en[1]);
+                let pm = e.state.p.fixed_view::<2, 2>(0, 0).into_owned();
+                nees += (err.transpose() * pm.try_inverse().unwrap() * err)[0];
+                n += 1;
+            }
+        }
+        let (lat, lon) = truth(69.5);
+        let coasted = without.estimate_at(69.5).unwrap();
+        let drift = crate::geo::distance_m(lat, lon, coasted.lat, coasted.lon);
+        let nees = nees / n as f64;
+        eprintln!(
+            "TDOA only (3 sites, 50 ns): worst {worst:.1} m, NEES {nees:.2}; coasting instead: {drift:.0} m"
+        );
+        assert!(worst < 60.0, "worst {worst} m");
+        assert!(drift > 2.0 * worst, "coasting {drift} m vs {worst} m");
+        assert!((0.8..4.0).contains(&nees), "NEES {nees}");
     }
 }
