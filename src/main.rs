@@ -95,7 +95,9 @@ fn main() -> ExitCode {
     let live = matches!(&cli.command, Command::Run { capture: None, .. } | Command::Replay { .. });
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(if live { "info" } else { "warn" }));
-    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
+    // Colours only on a terminal: journald and log files get plain text.
+    let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
+    tracing_subscriber::fmt().with_env_filter(filter).with_ansi(ansi).with_writer(std::io::stderr).init();
     let result = match cli.command {
         Command::Decode { format, reference, clock, input } => {
             cmd::decode::run(cmd::decode::DecodeArgs { format, reference, clock, input })

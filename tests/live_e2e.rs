@@ -61,6 +61,12 @@ fn world() -> World {
     std::fs::create_dir_all(&dir).unwrap();
     let mut s = Scenario::load(&root().join("fixtures/scenarios/tma-busy.toml")).unwrap();
     s.duration_s = 30.0;
+    // The restarting receiver (rx08, a TCP-server sender here) restarts 12 s in.
+    for r in &mut s.receiver {
+        if !r.resets_s.is_empty() {
+            r.resets_s = vec![12.0];
+        }
+    }
     let (mut cap, mut truth) = (Vec::new(), Vec::new());
     fuse1090::sim::simulate(&s, &mut cap, &mut truth).unwrap();
     let capture = dir.join("capture.txt");
@@ -256,11 +262,20 @@ fn daemon_end_to_end_over_loopback_with_faults() {
     std::fs::File::open(w.dir.join("daemon.log")).unwrap().read_to_string(&mut log).unwrap();
 
     // The operator sees every event in the log.
-    for needle in
-        ["unknown sender refused", "SIGHUP: configuration re-read", "disconnected", "stopping", "stats:"]
-    {
+    for needle in [
+        "unknown sender refused",
+        "SIGHUP: configuration re-read",
+        "disconnected",
+        "stopping",
+        "stats:",
+        "clock jump: receiver restarted",
+    ] {
         assert!(log.contains(needle), "log lacks {needle:?}:\n{}", &log[log.len().saturating_sub(3000)..]);
     }
+    // The TCP clients started before their receivers listened: refused, then
+    // connected after backing off.
+    let refused = log.find("cannot connect").expect("a refused connection");
+    assert!(log[refused..].contains(": connected receiver="), "no reconnection after the refusal");
     // Tracks for the aircraft of the truth, through every input kind.
     let records: Vec<Value> = json_dg.iter().map(|d| serde_json::from_slice(d).unwrap()).collect();
     let tracked: HashSet<String> = records
