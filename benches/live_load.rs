@@ -87,7 +87,12 @@ fn main() {
         "adsb p50/p99 ms",
         "mlat p50/p99 ms"
     );
-    for speed in [1.0, 2.0, 4.0, 8.0] {
+    // FUSE1090_LOAD_SPEEDS="1,2" runs only those speeds.
+    let speeds: Vec<f64> = std::env::var("FUSE1090_LOAD_SPEEDS")
+        .ok()
+        .map(|v| v.split(',').filter_map(|x| x.trim().parse().ok()).collect())
+        .unwrap_or_else(|| vec![1.0, 2.0, 4.0, 8.0]);
+    for speed in speeds {
         let sub = UdpSocket::bind("127.0.0.1:0").unwrap();
         let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
         let mut cfg = format!(

@@ -516,7 +516,9 @@ impl Fuser {
             {
                 continue;
             }
-            let Some(e) = a.fused.estimate_at(now.max(a.fused.t())) else {
+            // The track's own latest estimate, moved to now along its velocity:
+            // a full prediction for thousands of tracks would stall the core.
+            let Some(e) = a.fused.estimate_at(a.fused.t()) else {
                 continue;
             };
             let Some(alt) = e.alt_m else {
@@ -525,7 +527,10 @@ impl Fuser {
             let plane = *origin.get_or_insert_with(|| Plane::new(e.lat, e.lon, 0.0));
             let en = plane.to_en(e.lat, e.lon);
             let alt_ft = a.alt_baro_ft.map_or(alt / crate::geo::FT_TO_M, f64::from);
-            kin.push(conflict::Kinematics { addr, pos: [en[0], en[1], alt], vel: e.vel_enu, alt_ft });
+            let dt = (now - e.t).max(0.0);
+            let v = e.vel_enu;
+            let pos = [en[0] + v[0] * dt, en[1] + v[1] * dt, alt + v[2] * dt];
+            kin.push(conflict::Kinematics { addr, pos, vel: v, alt_ft });
         }
         let found: HashMap<(u32, u32), conflict::Conflict> = conflict::find(&self.cfg.conflict, &kin)
             .into_iter()
