@@ -160,17 +160,19 @@ pub struct Estimate {
     pub lat: f64,
     pub lon: f64,
     pub alt_m: Option<f64>,
-    /// East, north, up (m/s); up 0 when the height is unknown.
+    /// East, north, up (m/s) at the aircraft; up 0 when the height is unknown.
     pub vel_enu: [f64; 3],
+    /// Horizontal position covariance at the aircraft (east/north, m^2).
+    pub cov_local: [[f64; 2]; 2],
     /// Horizontal state and covariance in `plane`.
     pub plane: Plane,
     pub state: Gaussian,
 }
 
 impl Estimate {
+    /// Horizontal position covariance in the aircraft's own east/north (m^2).
     pub fn cov_en(&self) -> [[f64; 2]; 2] {
-        let p = &self.state.p;
-        [[p[(0, 0)], p[(0, 1)]], [p[(1, 0)], p[(1, 1)]]]
+        self.cov_local
     }
 
     /// The horizontal state expressed in another plane.
@@ -356,7 +358,18 @@ impl Track {
                     self.vertical(m.t, 1, c, var);
                 }
                 let gate = self.gate;
-                let vm = kf::velocity(v_en, cov);
+                // Reported in the aircraft's own east/north: turned into the
+                // plane's axes (they differ by the meridians' convergence,
+                // a third of a degree 20 km east or west at mid latitudes).
+                let r = match (self.state.plane, &self.state.imm) {
+                    (Some(plane), Some(imm)) => {
+                        let x = imm.estimate().x;
+                        let (lat, lon) = plane.to_geodetic(x[0], x[1]);
+                        Plane::new(lat, lon, plane.h).rotation_to(&plane)
+                    }
+                    _ => Matrix2::identity(),
+                };
+                let vm = kf::velocity(r * v_en, r * cov * r.transpose());
                 match &mut self.state.imm {
                     None => Outcome::Early,
                     Some(imm) => match imm.prepare(dt) {
@@ -476,6 +489,9 @@ impl Track {
             return Outcome::Applied { nis: 0.0 };
         };
         let z = Vector2::from(plane.to_en(lat, lon));
+        // The covariance is given in the reporting point's east/north.
+        let turn = Plane::new(lat, lon, plane.h).rotation_to(&plane);
+        let cov_en = turn * cov_en * turn.transpose();
         let prep = imm.prepare(dt);
         let pred = prep.combined();
         // The report's time error moves it along the velocity.
@@ -612,12 +628,17 @@ impl Track {
             v.predict(t - state.t_v, self.cfg.vertical_q);
             v
         });
+        // Published in the aircraft's own east/north, not the plane's.
+        let r = plane.rotation_to(&Plane::new(lat, lon, plane.h));
+        let v = r * Vector2::new(g.x[2], g.x[3]);
+        let c = r * g.p.fixed_view::<2, 2>(0, 0) * r.transpose();
         Some(Estimate {
             t,
             lat,
             lon,
             alt_m: vertical.map(|v| v.x[0]),
-            vel_enu: [g.x[2], g.x[3], vertical.map_or(0.0, |v| v.x[1])],
+            cov_local: [[c[(0, 0)], c[(0, 1)]], [c[(1, 0)], c[(1, 1)]]],
+            vel_enu: [v[0], v[1], vertical.map_or(0.0, |v| v.x[1])],
             plane,
             state: g,
         })
