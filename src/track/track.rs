@@ -436,18 +436,48 @@ impl Track {
         let (h, hv) = (v.x[0], v.p[(0, 0)]);
         let up = |e: f64, n: f64, h: f64| plane.up_at(e, n, h);
         let prep = imm.prepare(dt);
-        let nis = super::ukf::update(&prep.combined(), h, hv, &m, up).map_or(f64::INFINITY, |u| u.nis);
-        if nis > self.gate {
+        // One unscented transform at the combined prediction, as a linear
+        // regression every model applies (see `ukf`).
+        let Some((hm, z, r)) = super::ukf::linearise(&prep.combined(), h, hv, &m, up) else {
             return Outcome::Gated;
-        }
-        match imm.update_with(
-            &prep,
-            |g| super::ukf::update(g, h, hv, &m, up),
-            |g| super::ukf::update(g, h, hv, &m, up).map_or(f64::INFINITY, |u| u.nis),
-        ) {
-            Some(step) => Outcome::Applied { nis: step.nis },
+        };
+        let step = match z.len() {
+            1 => {
+                let lin = Linear::<1> {
+                    h: nalgebra::SMatrix::<f64, 1, 6>::from_iterator(hm.iter().copied()),
+                    z: nalgebra::SVector::<f64, 1>::new(z[0]),
+                    r: nalgebra::SMatrix::<f64, 1, 1>::new(r[(0, 0)]),
+                };
+                Self::gated_update(imm, &prep, &lin, self.gate)
+            }
+            _ => {
+                let lin = Linear::<2> {
+                    h: nalgebra::SMatrix::<f64, 2, 6>::from_iterator(hm.iter().copied()),
+                    z: nalgebra::SVector::<f64, 2>::new(z[0], z[1]),
+                    r: nalgebra::SMatrix::<f64, 2, 2>::from_iterator(r.iter().copied()),
+                };
+                Self::gated_update(imm, &prep, &lin, self.gate)
+            }
+        };
+        match step {
+            Some(nis) => Outcome::Applied { nis },
             None => Outcome::Gated,
         }
+    }
+
+    /// A linear update unless the combined prediction's NIS is beyond the gate.
+    fn gated_update<const M: usize>(
+        imm: &mut Imm,
+        prep: &super::imm::Prepared,
+        m: &Linear<M>,
+        gate: f64,
+    ) -> Option<f64> {
+        let (nu, s) = prep.combined().innovation(m);
+        let nis = s.cholesky().map(|c| nu.dot(&c.solve(&nu)))?;
+        if nis > gate {
+            return None;
+        }
+        imm.update(prep, m).map(|s| s.nis)
     }
 
     /// A vertical measurement: height (row 0) or climb rate (row 1).

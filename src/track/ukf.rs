@@ -8,6 +8,12 @@
 //! so the TDOAs' correlation through their common reference receiver, and
 //! the height's uncertainty, come out of the transform instead of being
 //! linearised by hand.
+//!
+//! For the IMM the transform is run once, on the combined prediction, and
+//! turned into its statistical linear regression ([`linearise`]): a linear
+//! measurement `H x + b` with the regression's residual in its noise, which
+//! every model then applies with the ordinary linear update. One transform
+//! instead of one per model (and per gate), the same first two moments.
 
 use nalgebra::{DMatrix, DVector, Matrix6, Vector3, Vector6};
 
@@ -38,16 +44,26 @@ impl Tdoa {
     }
 }
 
-/// Updates `g` (and the height `h`, variance `h_var`) with `m`. `up(e, n, h)`
-/// gives the plane's up coordinate of a point at height `h`. `None` when
-/// the transform degenerates.
-pub fn update(
+/// The unscented transform of `m` at `g` (augmented with the height and the
+/// receivers' noise): sigma points' states and predicted measurements, the
+/// weights, and the augmented mean and covariance.
+struct Transform {
+    mean: DVector<f64>,
+    cov: DMatrix<f64>,
+    z_mean: DVector<f64>,
+    /// Innovation covariance (noise included through the sigma points).
+    s: DMatrix<f64>,
+    /// State-measurement cross-covariance (augmented state rows).
+    c: DMatrix<f64>,
+}
+
+fn transform(
     g: &Gaussian,
     h: f64,
     h_var: f64,
     m: &Tdoa,
     up: impl Fn(f64, f64, f64) -> f64,
-) -> Option<Updated> {
+) -> Option<Transform> {
     let k = m.receivers.len();
     if k < 2 || m.sigma_m.len() != k || m.z.len() != k - 1 {
         return None;
@@ -74,26 +90,35 @@ pub fn update(
     let w0m = lambda / (n as f64 + lambda);
     let w0c = w0m + 1.0 - ALPHA * ALPHA + BETA;
     let wi = 1.0 / (2.0 * (n as f64 + lambda));
-    let weight = |j: usize, cov: bool| match (j, cov) {
-        (0, false) => w0m,
-        (0, true) => w0c,
-        _ => wi,
-    };
     let zs: Vec<DVector<f64>> = points.iter().map(|p| m.predict(p, &up)).collect();
-    let mz = zs.len();
     let dim = k - 1;
     let mut z_mean = DVector::zeros(dim);
-    for (j, z) in zs.iter().enumerate().take(mz) {
-        z_mean += z * weight(j, false);
+    for (j, z) in zs.iter().enumerate() {
+        z_mean += z * if j == 0 { w0m } else { wi };
     }
     let mut s = DMatrix::zeros(dim, dim);
     let mut c = DMatrix::zeros(n, dim);
     for (j, (p, z)) in points.iter().zip(&zs).enumerate() {
+        let w = if j == 0 { w0c } else { wi };
         let dz = z - &z_mean;
-        let dx = p - &mean;
-        s += &dz * dz.transpose() * weight(j, true);
-        c += &dx * dz.transpose() * weight(j, true);
+        s += &dz * dz.transpose() * w;
+        c += (p - &mean) * dz.transpose() * w;
     }
+    Some(Transform { mean, cov, z_mean, s, c })
+}
+
+/// Updates `g` (and the height `h`, variance `h_var`) with `m`. `up(e, n, h)`
+/// gives the plane's up coordinate of a point at height `h`. `None` when
+/// the transform degenerates.
+pub fn update(
+    g: &Gaussian,
+    h: f64,
+    h_var: f64,
+    m: &Tdoa,
+    up: impl Fn(f64, f64, f64) -> f64,
+) -> Option<Updated> {
+    let Transform { mean, cov, z_mean, s, c } = transform(g, h, h_var, m, up)?;
+    let dim = z_mean.len();
     let chol = s.clone().cholesky()?;
     let s_inv = chol.inverse();
     let gain = &c * &s_inv;
@@ -114,6 +139,30 @@ pub fn update(
         return None;
     }
     Some(Updated { post, nis, likelihood: log_likelihood.exp(), log_likelihood })
+}
+
+/// The statistical linear regression of `m` at `g`: `(H, z', R)` such that
+/// `z' = H x + v`, `v ~ N(0, R)` has the transform's first two moments
+/// (`z' = z - b` with the regression's offset `b` removed), as rows for the
+/// 1 or 2 time differences.
+pub fn linearise(
+    g: &Gaussian,
+    h: f64,
+    h_var: f64,
+    m: &Tdoa,
+    up: impl Fn(f64, f64, f64) -> f64,
+) -> Option<(DMatrix<f64>, DVector<f64>, DMatrix<f64>)> {
+    let t = transform(g, h, h_var, m, up)?;
+    let p_inv = g.p.cholesky()?.inverse();
+    let pxz = t.c.view((0, 0), (6, t.z_mean.len())).into_owned();
+    let p_inv = DMatrix::from_iterator(6, 6, p_inv.iter().copied());
+    let hm = pxz.transpose() * &p_inv;
+    let gx = DVector::from_iterator(6, g.x.iter().copied());
+    let b = &t.z_mean - &hm * &gx;
+    let r = &t.s - &hm * DMatrix::from_iterator(6, 6, g.p.iter().copied()) * hm.transpose();
+    let r = (&r + r.transpose()) * 0.5;
+    let z = DVector::from_column_slice(&m.z) - b;
+    Some((hm, z, r))
 }
 
 #[cfg(test)]
