@@ -352,11 +352,19 @@ impl Core {
         out.extend(self.tracks_out.drain(..).map(event));
     }
 
-    /// Time of applicability of a frame: exact for GPS-timed receivers, the
-    /// arrival time otherwise.
-    fn frame_time(&self, rx: usize, arrival: f64, frame: &RawFrame) -> (f64, bool) {
+    /// Time of applicability of a frame: exact for GPS-timed receivers, and
+    /// for counter-timed ones synchronised with a GPS-timed one (within a
+    /// microsecond); the arrival time otherwise.
+    fn frame_time(&mut self, rx: usize, arrival: f64, frame: &RawFrame) -> (f64, bool) {
         match self.receivers[rx].decl.clock {
             ClockKind::Gps if frame.has_timing() => (ClockKind::gps_unix(frame.timestamp, arrival), true),
+            ClockKind::Beast12 if frame.has_timing() => {
+                match self.mlat.gps_time_of(rx, frame.timestamp, arrival) {
+                    // Sane only: within a second of the arrival, converted to a microsecond.
+                    Some((t, var)) if var < 1e-12 && (arrival - t).abs() < 1.0 => (t, true),
+                    _ => (arrival, false),
+                }
+            }
             _ => (arrival, false),
         }
     }
@@ -460,7 +468,7 @@ impl Core {
 
     /// The ADS-B position report of a decoded frame, if it has a published position.
     fn position_report(
-        &self,
+        &mut self,
         rx: usize,
         arrival: f64,
         frame: &RawFrame,

@@ -141,6 +141,9 @@ struct Rx {
     /// Last (local time, arrival time) seen, to notice clock jumps.
     last_seen: Option<(f64, f64)>,
     cal: Calibration,
+    /// The GPS-timed receiver its clock is best synchronised with, and when
+    /// that was last chosen (arrival time).
+    gps_partner: Option<(usize, f64)>,
 }
 
 /// What self-calibration has learnt about a receiver's timing.
@@ -216,6 +219,40 @@ pub struct Mlat {
 }
 
 impl Mlat {
+    /// The GPS time (Unix s) at which receiver `rx` (a free-running counter)
+    /// received a frame stamped `ts`, through its synchronisation with a
+    /// GPS-timed receiver, and the variance of that conversion; `None` when
+    /// it is not synchronised with one. This dates ADS-B reports decoded from
+    /// counter-timed receivers exactly instead of by their arrival at the
+    /// server (tens of milliseconds late).
+    pub fn gps_time_of(&mut self, rx: usize, ts: u64, now: f64) -> Option<(f64, f64)> {
+        let r = self.rxs.get(rx)?;
+        if r.clock != ClockKind::Beast12 || r.last_seen.is_none() {
+            return None;
+        }
+        let epoch_ns = self.gps_epoch_ns?;
+        let local =
+            (ts as i64 - r.beast_epoch? as i64) as f64 / 12e6 - self.cfg.timestamp_offset_beast12_ns * 1e-9;
+        // Choose the partner every few seconds: the best-synchronised GPS receiver.
+        let partner = match r.gps_partner {
+            Some((g, at)) if now - at < 10.0 => Some(g),
+            _ => {
+                let best = (0..self.rxs.len())
+                    .filter(|&g| self.rxs[g].clock == ClockKind::Gps)
+                    .filter_map(|g| self.sync.edge(rx, g, local, now).map(|(_, v)| (g, v)))
+                    .min_by(|a, b| a.1.total_cmp(&b.1))
+                    .map(|(g, _)| g);
+                self.rxs[rx].gps_partner = best.map(|g| (g, now));
+                best
+            }
+        }?;
+        let (off, var) = self.sync.edge(rx, partner, local, now)?;
+        // In the GPS clock's local seconds, then Unix time (the GPS stamps'
+        // own reference offset is removed as in `local_time`).
+        let t = local + off + self.cfg.timestamp_offset_gps_ns * 1e-9;
+        Some((epoch_ns as f64 * 1e-9 + t, var))
+    }
+
     /// The time differences of the last group that was too small for a fix.
     pub fn take_tdoa(&mut self) -> Option<TdoaGroup> {
         self.tdoa.take()
@@ -255,6 +292,7 @@ impl Mlat {
             sigma_t: jitter * 1e-9,
             beast_epoch: None,
             last_seen: None,
+            gps_partner: None,
             cal: Calibration::default(),
         });
         self.sync.add_receiver(d.clock);

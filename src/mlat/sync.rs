@@ -182,7 +182,7 @@ impl ClockSync {
 
     /// The relation between two receivers' clocks if usable: `t_j = t_i + offset`,
     /// evaluated near `t_i`, with its variance.
-    fn edge(&self, i: usize, j: usize, t_i: f64, now: f64) -> Option<(f64, f64)> {
+    pub(crate) fn edge(&self, i: usize, j: usize, t_i: f64, now: f64) -> Option<(f64, f64)> {
         if self.clocks[i] == ClockKind::Gps && self.clocks[j] == ClockKind::Gps {
             return Some((0.0, 0.0));
         }
