@@ -331,7 +331,10 @@ impl Core {
             }
             _ => {}
         }
-        let report = self.position_report(rx, arrival, frame, &d);
+        // Only extended squitters (positions, velocities) need their time of
+        // applicability: worked out once, and only for them.
+        let timing = matches!(d.msg.body, Body::Extended(_)).then(|| self.frame_time(rx, arrival, frame));
+        let report = timing.and_then(|timing| self.position_report(rx, timing, &d));
         info.suspect = self.fuser.is_suspect(d.msg.addr);
         info.report = report.as_ref().and_then(|p| Some((p.lat, p.lon, p.sigma_m?)));
         if let Some(p) = &report {
@@ -344,7 +347,7 @@ impl Core {
             }
         }
         self.grouper.set_newest_info(info);
-        self.feed_tracker(rx, arrival, frame, &d, report.as_ref());
+        self.feed_tracker(arrival, timing, &d, report.as_ref());
         if let Some(p) = report {
             self.stats.positions += 1;
             out.push(Event::Position(p));
@@ -371,11 +374,11 @@ impl Core {
 
     /// What a decoded frame tells the tracker: positions, velocities,
     /// altitudes, and identity.
+    /// `timing`: the frame's time of applicability, for extended squitters.
     fn feed_tracker(
         &mut self,
-        rx: usize,
         arrival: f64,
-        frame: &RawFrame,
+        timing: Option<(f64, bool)>,
         d: &crate::modes::Decoded,
         report: Option<&PositionReport>,
     ) {
@@ -383,7 +386,6 @@ impl Core {
             return;
         }
         let addr = d.msg.addr;
-        let (t_frame, _) = self.frame_time(rx, arrival, frame);
         let tcfg = self.time_sigma;
         let baro_sigma_m = self.baro_sigma_m;
         let out = &mut self.tracks_out;
@@ -430,7 +432,7 @@ impl Core {
                 }
                 Es::Emergency { squawk, .. } => self.fuser.set_squawk(addr, squawk),
                 Es::Velocity(v) => {
-                    let (Some(ve), Some(vn)) = (v.ve_kt, v.vn_kt) else {
+                    let (Some(ve), Some(vn), Some((t_frame, _))) = (v.ve_kt, v.vn_kt, timing) else {
                         return;
                     };
                     // NACv: 95% bounds of horizontal (m/s) and vertical (ft/s) velocity error.
@@ -468,18 +470,14 @@ impl Core {
 
     /// The ADS-B position report of a decoded frame, if it has a published position.
     fn position_report(
-        &mut self,
+        &self,
         rx: usize,
-        arrival: f64,
-        frame: &RawFrame,
+        (t, gps_timed): (f64, bool),
         d: &crate::modes::Decoded,
     ) -> Option<PositionReport> {
-        let decl = &self.receivers[rx].decl;
         let (Some(p), Body::Extended(es)) = (d.position.filter(|p| p.reliable), d.msg.body) else {
             return None;
         };
-        let _ = decl;
-        let (t, gps_timed) = self.frame_time(rx, arrival, frame);
         let (alt_m, alt_baro_ft, alt_sigma_m) = match es.kind {
             Es::AirbornePosition { alt_ft: Some(a), gnss: true, .. } => {
                 (Some(a as f64 * FT_TO_M), None, Some(15.0))
