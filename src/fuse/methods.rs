@@ -122,22 +122,9 @@ pub fn fuse(method: Method, a: &Estimate, b: &Estimate, cross: Option<&Matrix6<f
     if !g.healthy() {
         return None;
     }
-    let (lat, lon) = a.plane.to_geodetic(g.x[0], g.x[1]);
     let alt_m = a.alt_m.or(b.alt_m);
     let up = if a.alt_m.is_some() { a.vel_enu[2] } else { b.vel_enu[2] };
-    // Published in the aircraft's own east/north.
-    let r = a.plane.rotation_to(&crate::track::plane::Plane::new(lat, lon, a.plane.h));
-    let v = r * nalgebra::Vector2::new(g.x[2], g.x[3]);
-    let c = r * g.p.fixed_view::<2, 2>(0, 0) * r.transpose();
-    Some(Estimate {
-        lat,
-        lon,
-        alt_m,
-        vel_enu: [v[0], v[1], up],
-        cov_local: [[c[(0, 0)], c[(0, 1)]], [c[(1, 0)], c[(1, 1)]]],
-        state: g,
-        ..*a
-    })
+    Some(Estimate::new(a.t, a.plane, g, alt_m, up))
 }
 
 /// The single track with the smaller horizontal position covariance.

@@ -64,6 +64,13 @@ impl Plane {
         h - self.h - (e * e + n * n) / (2.0 * (EARTH_MEAN_RADIUS_M + self.h))
     }
 
+    /// Rotation taking horizontal vectors given in the local east/north at
+    /// (`lat`, `lon`) into this plane's axes (they differ by the meridians'
+    /// convergence); its transpose goes back.
+    pub fn from_local(&self, lat: f64, lon: f64) -> Matrix2<f64> {
+        Plane::new(lat, lon, self.h).rotation_to(self)
+    }
+
     /// Rotation taking horizontal vectors of `self` into `other`'s axes.
     pub fn rotation_to(&self, other: &Plane) -> Matrix2<f64> {
         Matrix2::new(

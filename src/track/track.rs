@@ -170,6 +170,26 @@ pub struct Estimate {
 }
 
 impl Estimate {
+    /// The estimate of a horizontal state `g` in `plane`, with its height
+    /// and climb rate: position, velocity and covariance published in the
+    /// aircraft's own east/north, not the plane's.
+    pub fn new(t: f64, plane: Plane, g: Gaussian, alt_m: Option<f64>, climb: f64) -> Estimate {
+        let (lat, lon) = plane.to_geodetic(g.x[0], g.x[1]);
+        let r = plane.from_local(lat, lon).transpose();
+        let v = r * Vector2::new(g.x[2], g.x[3]);
+        let c = r * g.p.fixed_view::<2, 2>(0, 0) * r.transpose();
+        Estimate {
+            t,
+            lat,
+            lon,
+            alt_m,
+            vel_enu: [v[0], v[1], climb],
+            cov_local: [[c[(0, 0)], c[(0, 1)]], [c[(1, 0)], c[(1, 1)]]],
+            plane,
+            state: g,
+        }
+    }
+
     /// Horizontal position covariance in the aircraft's own east/north (m^2).
     pub fn cov_en(&self) -> [[f64; 2]; 2] {
         self.cov_local
@@ -365,7 +385,7 @@ impl Track {
                     (Some(plane), Some(imm)) => {
                         let x = imm.estimate().x;
                         let (lat, lon) = plane.to_geodetic(x[0], x[1]);
-                        Plane::new(lat, lon, plane.h).rotation_to(&plane)
+                        plane.from_local(lat, lon)
                     }
                     _ => Matrix2::identity(),
                 };
@@ -520,7 +540,7 @@ impl Track {
         };
         let z = Vector2::from(plane.to_en(lat, lon));
         // The covariance is given in the reporting point's east/north.
-        let turn = Plane::new(lat, lon, plane.h).rotation_to(&plane);
+        let turn = plane.from_local(lat, lon);
         let cov_en = turn * cov_en * turn.transpose();
         let prep = imm.prepare(dt);
         let pred = prep.combined();
@@ -653,25 +673,11 @@ impl Track {
         if !g.healthy() {
             return None;
         }
-        let (lat, lon) = plane.to_geodetic(g.x[0], g.x[1]);
         let vertical = state.vertical.map(|mut v| {
             v.predict(t - state.t_v, self.cfg.vertical_q);
             v
         });
-        // Published in the aircraft's own east/north, not the plane's.
-        let r = plane.rotation_to(&Plane::new(lat, lon, plane.h));
-        let v = r * Vector2::new(g.x[2], g.x[3]);
-        let c = r * g.p.fixed_view::<2, 2>(0, 0) * r.transpose();
-        Some(Estimate {
-            t,
-            lat,
-            lon,
-            alt_m: vertical.map(|v| v.x[0]),
-            cov_local: [[c[(0, 0)], c[(0, 1)]], [c[(1, 0)], c[(1, 1)]]],
-            vel_enu: [v[0], v[1], vertical.map_or(0.0, |v| v.x[1])],
-            plane,
-            state: g,
-        })
+        Some(Estimate::new(t, plane, g, vertical.map(|v| v.x[0]), vertical.map_or(0.0, |v| v.x[1])))
     }
 }
 
