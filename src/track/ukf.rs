@@ -15,9 +15,9 @@
 //! every model then applies with the ordinary linear update. One transform
 //! instead of one per model (and per gate), the same first two moments.
 
-use nalgebra::{DMatrix, DVector, Matrix6, Vector3, Vector6};
+use nalgebra::{DMatrix, DVector, Vector3};
 
-use super::kf::{Gaussian, Updated};
+use super::kf::Gaussian;
 
 /// Time differences of arrival at `receivers` (plane-local east, north, up
 /// of each antenna, m) relative to the first: `z[i] = |p - r[i+1]| - |p - r[0]|`
@@ -45,11 +45,9 @@ impl Tdoa {
 }
 
 /// The unscented transform of `m` at `g` (augmented with the height and the
-/// receivers' noise): sigma points' states and predicted measurements, the
-/// weights, and the augmented mean and covariance.
+/// receivers' noise): the predicted measurement's mean and covariance, and
+/// its cross-covariance with the augmented state.
 struct Transform {
-    mean: DVector<f64>,
-    cov: DMatrix<f64>,
     z_mean: DVector<f64>,
     /// Innovation covariance (noise included through the sigma points).
     s: DMatrix<f64>,
@@ -104,41 +102,7 @@ fn transform(
         s += &dz * dz.transpose() * w;
         c += (p - &mean) * dz.transpose() * w;
     }
-    Some(Transform { mean, cov, z_mean, s, c })
-}
-
-/// Updates `g` (and the height `h`, variance `h_var`) with `m`. `up(e, n, h)`
-/// gives the plane's up coordinate of a point at height `h`. `None` when
-/// the transform degenerates.
-pub fn update(
-    g: &Gaussian,
-    h: f64,
-    h_var: f64,
-    m: &Tdoa,
-    up: impl Fn(f64, f64, f64) -> f64,
-) -> Option<Updated> {
-    let Transform { mean, cov, z_mean, s, c } = transform(g, h, h_var, m, up)?;
-    let dim = z_mean.len();
-    let chol = s.clone().cholesky()?;
-    let s_inv = chol.inverse();
-    let gain = &c * &s_inv;
-    let nu = DVector::from_column_slice(&m.z) - &z_mean;
-    let x = &mean + &gain * &nu;
-    let p = &cov - &gain * &s * gain.transpose();
-    let nis = (nu.transpose() * &s_inv * &nu)[0];
-    let det = chol.l().diagonal().iter().map(|d| d * d).product::<f64>();
-    let log_likelihood = -0.5 * nis - 0.5 * (dim as f64 * (2.0 * std::f64::consts::PI).ln() + det.ln());
-    let post = Gaussian {
-        x: Vector6::from_iterator(x.rows(0, 6).iter().copied()),
-        p: {
-            let m6 = Matrix6::from_iterator(p.view((0, 0), (6, 6)).iter().copied());
-            (m6 + m6.transpose()) * 0.5
-        },
-    };
-    if !post.healthy() || !log_likelihood.is_finite() {
-        return None;
-    }
-    Some(Updated { post, nis, likelihood: log_likelihood.exp(), log_likelihood })
+    Some(Transform { z_mean, s, c })
 }
 
 /// The statistical linear regression of `m` at `g`: `(H, z', R)` such that
@@ -169,6 +133,7 @@ pub fn linearise(
 mod tests {
     use super::*;
     use crate::track::kf::diagonal;
+    use nalgebra::Vector6;
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
 
@@ -200,7 +165,14 @@ mod tests {
             let r = |i: usize| (truth - rx[i]).norm() + eps[i];
             let m =
                 Tdoa { receivers: rx.clone(), sigma_m: vec![sigma; 3], z: vec![r(1) - r(0), r(2) - r(0)] };
-            let u = update(&g, truth.z, 25.0, &m, |_, _, h| h).unwrap();
+            // As the tracker applies it: the regression, then a linear update.
+            let (hm, z, rm) = linearise(&g, truth.z, 25.0, &m, |_, _, h| h).unwrap();
+            let lin = crate::track::kf::Linear::<2> {
+                h: nalgebra::SMatrix::<f64, 2, 6>::from_iterator(hm.iter().copied()),
+                z: nalgebra::Vector2::new(z[0], z[1]),
+                r: nalgebra::Matrix2::from_iterator(rm.iter().copied()),
+            };
+            let u = g.update_linear(&lin).unwrap();
             let e = nalgebra::Vector2::new(u.post.x[0] - truth.x, u.post.x[1] - truth.y);
             let p = u.post.p.fixed_view::<2, 2>(0, 0).into_owned();
             nees += (e.transpose() * p.try_inverse().unwrap() * e)[0];
