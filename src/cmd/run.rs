@@ -115,36 +115,29 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
     let mut core_cfg = cfg.core.clone();
     core_cfg.publish_source_tracks = cfg.publish_source_tracks;
     let mut core = Core::new(&core_cfg);
-    let mut ids: Vec<String> = Vec::new();
     let mut events = Vec::new();
     let (mut first, mut last) = (f64::INFINITY, f64::NEG_INFINITY);
-    let flush = |events: &mut Vec<_>, ids: &[String], out: &mut BufWriter<File>| -> Result<()> {
+    let flush = |events: &mut Vec<_>, core: &Core, out: &mut BufWriter<File>| -> Result<()> {
         for ev in events.drain(..) {
-            write_event(out, &ev, |i| ids[i].as_str()).context("writing output")?;
+            write_event(out, &ev, |i| core.receiver_id(i)).context("writing output")?;
         }
         Ok(())
     };
     for batch in rx {
         for rec in batch {
-            match rec {
-                CaptureRecord::Receiver(decl) => {
-                    ids.push(decl.id.clone());
-                    core.add_receiver(decl);
-                }
-                CaptureRecord::Frame(f) => {
-                    first = first.min(f.arrival);
-                    last = last.max(f.arrival);
-                    core.on_frame(f.rx, f.arrival, &f.frame, &mut events);
-                }
+            if let CaptureRecord::Frame(f) = &rec {
+                first = first.min(f.arrival);
+                last = last.max(f.arrival);
             }
+            core.on_record(rec, &mut events);
         }
-        flush(&mut events, &ids, &mut out)?;
+        flush(&mut events, &core, &mut out)?;
     }
     let (skipped, errors) = parser.join().map_err(|_| anyhow::anyhow!("capture reader panicked"))??;
     core.finish(&mut events);
-    flush(&mut events, &ids, &mut out)?;
+    flush(&mut events, &core, &mut out)?;
     out.flush().context("writing output")?;
-    eprintln!("{}", core.mlat().report(last, &|k| ids[k].clone()));
+    eprintln!("{}", core.mlat().report(last, &|k| core.receiver_id(k).to_string()));
     eprintln!("tracking: {:?}", core.fuser().stats());
     for e in &errors {
         eprintln!("fuse1090: skipped {e}");

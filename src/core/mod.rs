@@ -12,7 +12,7 @@
 
 use serde::Deserialize;
 
-use crate::feed::capture::{ClockKind, ReceiverDecl};
+use crate::feed::capture::{CaptureRecord, ClockKind, ReceiverDecl};
 use crate::feed::RawFrame;
 use crate::fuse::{Alert, FuseConfig, Fuser, Output, TrackReport};
 use crate::geo::geodetic_to_ecef;
@@ -177,6 +177,21 @@ impl Core {
         self.mlat.add_receiver(&decl);
         self.receivers.push(RxState { decl, frames: 0 });
         self.receivers.len() - 1
+    }
+
+    /// One record of a capture: a receiver declared, or a frame.
+    pub fn on_record(&mut self, rec: CaptureRecord, out: &mut Vec<Event>) {
+        match rec {
+            CaptureRecord::Receiver(d) => {
+                self.add_receiver(d);
+            }
+            CaptureRecord::Frame(f) => self.on_frame(f.rx, f.arrival, &f.frame, out),
+        }
+    }
+
+    /// The id of receiver `rx` (as declared), for the records that name it.
+    pub fn receiver_id(&self, rx: usize) -> &str {
+        self.receivers.get(rx).map_or("?", |r| r.decl.id.as_str())
     }
 
     pub fn receivers(&self) -> impl Iterator<Item = (&ReceiverDecl, u64)> {

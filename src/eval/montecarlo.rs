@@ -12,7 +12,7 @@ use serde::Serialize;
 
 use super::{evaluate, nees_band, Truth};
 use crate::core::{Core, CoreConfig};
-use crate::feed::capture::{CaptureReader, CaptureRecord};
+use crate::feed::capture::CaptureReader;
 use crate::fuse::Method;
 use crate::publish::json::write_event;
 use crate::sim::scenario::Scenario;
@@ -46,24 +46,17 @@ struct Acc {
 pub fn run_in_memory(capture: &[u8], cfg: &CoreConfig) -> Result<Vec<u8>> {
     let mut reader = CaptureReader::new(capture, "capture");
     let mut core = Core::new(cfg);
-    let mut ids: Vec<String> = Vec::new();
     let mut events = Vec::new();
     let mut out = Vec::new();
     while let Some(rec) = reader.next_record()? {
-        match rec {
-            CaptureRecord::Receiver(d) => {
-                ids.push(d.id.clone());
-                core.add_receiver(d);
-            }
-            CaptureRecord::Frame(f) => core.on_frame(f.rx, f.arrival, &f.frame, &mut events),
-        }
+        core.on_record(rec, &mut events);
         for ev in events.drain(..) {
-            write_event(&mut out, &ev, |i| ids[i].as_str())?;
+            write_event(&mut out, &ev, |i| core.receiver_id(i))?;
         }
     }
     core.finish(&mut events);
     for ev in events.drain(..) {
-        write_event(&mut out, &ev, |i| ids[i].as_str())?;
+        write_event(&mut out, &ev, |i| core.receiver_id(i))?;
     }
     Ok(out)
 }

@@ -72,8 +72,7 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
         registry.receivers.write().expect("registry").push((r.clone(), Default::default()));
         decls.push(r.decl());
     }
-    let mut outputs = Outputs::new(&cfg.output, &cfg.service);
-    outputs.receiver_ids = cfg.receiver.iter().map(|r| r.id.clone()).collect();
+    let outputs = Outputs::new(&cfg.output, &cfg.service);
     let recorder = match cfg.service.record.as_str() {
         "" => None,
         p => Some(
@@ -137,9 +136,7 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
                                 }
                             }
                         }
-                        let mut outs = Outputs::new(&new.output, &new.service);
-                        outs.receiver_ids = registry.receivers.read().expect("registry").iter().map(|(r, _)| r.id.clone()).collect();
-                        let _ = tx.send(ToCore::Outputs(outs));
+                        let _ = tx.send(ToCore::Outputs(Outputs::new(&new.output, &new.service)));
                         if new.input != current.input {
                             for t in tasks.drain(..) {
                                 t.abort();
@@ -224,7 +221,7 @@ fn core_loop(
         }
         let now = unix_now();
         core.advance(now, &mut events);
-        outputs.publish(&events, now);
+        outputs.publish(&events, |i| core.receiver_id(i), now);
         events.clear();
         if watchdog.is_some_and(|w| last_ping.elapsed() * 2 >= w) {
             let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
@@ -241,7 +238,7 @@ fn core_loop(
         }
     }
     core.finish(&mut events);
-    outputs.publish(&events, unix_now());
+    outputs.publish(&events, |i| core.receiver_id(i), unix_now());
     if let Some(w) = recorder {
         let _ = w.into_inner().into_inner().map(|f| f.sync_all());
     }

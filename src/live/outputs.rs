@@ -43,8 +43,6 @@ pub struct Outputs {
     pub dests: Vec<Destination>,
     source: asterix::Source,
     max_bytes: usize,
-    /// Frame-index to receiver-id names for the JSON records.
-    pub receiver_ids: Vec<String>,
 }
 
 impl Outputs {
@@ -69,17 +67,15 @@ impl Outputs {
             dests,
             source: asterix::Source { sac: service.sac, sic: service.sic, service: service.service_id },
             max_bytes: service.max_datagram_bytes,
-            receiver_ids: Vec::new(),
         }
     }
 
-    /// Sends a batch of events to every destination; `now` for rate-limited logs.
-    pub fn publish(&mut self, events: &[Event], now: f64) {
+    /// Sends a batch of events to every destination; `name` gives receivers'
+    /// ids for the JSON records, `now` is for rate-limited logs.
+    pub fn publish<'a>(&mut self, events: &[Event], name: impl Fn(usize) -> &'a str, now: f64) {
         if events.is_empty() || self.dests.is_empty() {
             return;
         }
-        let ids = &self.receiver_ids;
-        let name = |i: usize| ids.get(i).map_or("?", String::as_str);
         let mut lines: Option<Vec<Vec<u8>>> = None;
         let mut blocks: Option<Vec<Vec<u8>>> = None;
         for d in &mut self.dests {
@@ -90,7 +86,7 @@ impl Outputs {
                         .filter(|e| !matches!(e, Event::Position(_)))
                         .map(|e| {
                             let mut b = Vec::new();
-                            let _ = json::write_event(&mut b, e, name);
+                            let _ = json::write_event(&mut b, e, &name);
                             b.pop(); // the newline: one object per datagram
                             b
                         })

@@ -48,13 +48,10 @@ pub fn run_core(capture: &[u8], cfg: &CoreConfig) -> (Core, Vec<Event>, Vec<Rece
     let mut events = Vec::new();
     let mut rxs = Vec::new();
     while let Some(rec) = reader.next_record().unwrap() {
-        match rec {
-            CaptureRecord::Receiver(d) => {
-                rxs.push(d.clone());
-                core.add_receiver(d);
-            }
-            CaptureRecord::Frame(f) => core.on_frame(f.rx, f.arrival, &f.frame, &mut events),
+        if let CaptureRecord::Receiver(d) = &rec {
+            rxs.push(d.clone());
         }
+        core.on_record(rec, &mut events);
     }
     core.finish(&mut events);
     (core, events, rxs)
