@@ -458,26 +458,13 @@ impl Track {
         let prep = imm.prepare(dt);
         // One unscented transform at the combined prediction, as a linear
         // regression every model applies (see `ukf`).
-        let Some((hm, z, r)) = super::ukf::linearise(&prep.combined(), h, hv, &m, up) else {
-            return Outcome::Gated;
-        };
-        let step = match z.len() {
-            1 => {
-                let lin = Linear::<1> {
-                    h: nalgebra::SMatrix::<f64, 1, 6>::from_iterator(hm.iter().copied()),
-                    z: nalgebra::SVector::<f64, 1>::new(z[0]),
-                    r: nalgebra::SMatrix::<f64, 1, 1>::new(r[(0, 0)]),
-                };
-                Self::gated_update(imm, &prep, &lin, self.gate)
-            }
-            _ => {
-                let lin = Linear::<2> {
-                    h: nalgebra::SMatrix::<f64, 2, 6>::from_iterator(hm.iter().copied()),
-                    z: nalgebra::SVector::<f64, 2>::new(z[0], z[1]),
-                    r: nalgebra::SMatrix::<f64, 2, 2>::from_iterator(r.iter().copied()),
-                };
-                Self::gated_update(imm, &prep, &lin, self.gate)
-            }
+        let combined = prep.combined();
+        let gate = self.gate;
+        let step = match m.z.len() {
+            1 => super::ukf::linearise::<1>(&combined, h, hv, &m, up)
+                .and_then(|lin| Self::gated_update(imm, &prep, &lin, gate)),
+            _ => super::ukf::linearise::<2>(&combined, h, hv, &m, up)
+                .and_then(|lin| Self::gated_update(imm, &prep, &lin, gate)),
         };
         match step {
             Some(nis) => Outcome::Applied { nis },

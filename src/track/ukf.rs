@@ -15,9 +15,9 @@
 //! every model then applies with the ordinary linear update. One transform
 //! instead of one per model (and per gate), the same first two moments.
 
-use nalgebra::{DMatrix, DVector, Vector3};
+use nalgebra::{DMatrix, DVector, SMatrix, SVector, Vector3};
 
-use super::kf::Gaussian;
+use super::kf::{Gaussian, Linear};
 
 /// Time differences of arrival at `receivers` (plane-local east, north, up
 /// of each antenna, m) relative to the first: `z[i] = |p - r[i+1]| - |p - r[0]|`
@@ -105,17 +105,20 @@ fn transform(
     Some(Transform { z_mean, s, c })
 }
 
-/// The statistical linear regression of `m` at `g`: `(H, z', R)` such that
-/// `z' = H x + v`, `v ~ N(0, R)` has the transform's first two moments
-/// (`z' = z - b` with the regression's offset `b` removed), as rows for the
-/// 1 or 2 time differences.
-pub fn linearise(
+/// The statistical linear regression of `m` at `g`: the linear measurement
+/// `z' = H x + v`, `v ~ N(0, R)` with the transform's first two moments
+/// (`z' = z - b` with the regression's offset `b` removed), for `M` time
+/// differences (`None` when `m` has another number, or the transform fails).
+pub fn linearise<const M: usize>(
     g: &Gaussian,
     h: f64,
     h_var: f64,
     m: &Tdoa,
     up: impl Fn(f64, f64, f64) -> f64,
-) -> Option<(DMatrix<f64>, DVector<f64>, DMatrix<f64>)> {
+) -> Option<Linear<M>> {
+    if m.z.len() != M {
+        return None;
+    }
     let t = transform(g, h, h_var, m, up)?;
     let p_inv = g.p.cholesky()?.inverse();
     let pxz = t.c.view((0, 0), (6, t.z_mean.len())).into_owned();
@@ -126,7 +129,11 @@ pub fn linearise(
     let r = &t.s - &hm * DMatrix::from_iterator(6, 6, g.p.iter().copied()) * hm.transpose();
     let r = (&r + r.transpose()) * 0.5;
     let z = DVector::from_column_slice(&m.z) - b;
-    Some((hm, z, r))
+    Some(Linear {
+        h: SMatrix::from_iterator(hm.iter().copied()),
+        z: SVector::from_iterator(z.iter().copied()),
+        r: SMatrix::from_iterator(r.iter().copied()),
+    })
 }
 
 #[cfg(test)]
@@ -166,12 +173,7 @@ mod tests {
             let m =
                 Tdoa { receivers: rx.clone(), sigma_m: vec![sigma; 3], z: vec![r(1) - r(0), r(2) - r(0)] };
             // As the tracker applies it: the regression, then a linear update.
-            let (hm, z, rm) = linearise(&g, truth.z, 25.0, &m, |_, _, h| h).unwrap();
-            let lin = crate::track::kf::Linear::<2> {
-                h: nalgebra::SMatrix::<f64, 2, 6>::from_iterator(hm.iter().copied()),
-                z: nalgebra::Vector2::new(z[0], z[1]),
-                r: nalgebra::Matrix2::from_iterator(rm.iter().copied()),
-            };
+            let lin = linearise::<2>(&g, truth.z, 25.0, &m, |_, _, h| h).unwrap();
             let u = g.update_linear(&lin).unwrap();
             let e = nalgebra::Vector2::new(u.post.x[0] - truth.x, u.post.x[1] - truth.y);
             let p = u.post.p.fixed_view::<2, 2>(0, 0).into_owned();
