@@ -28,8 +28,8 @@ fn sim(s: &Scenario) -> (Vec<u8>, Vec<u8>) {
 
 #[test]
 fn beast12_clocks_synchronise_and_fixes_reach_the_cramer_rao_bound() {
-    // The fusion-8seg flight and receivers, with the 83 ns jitter.
-    let mut scenario = Scenario::load(&root().join("fixtures/scenarios/fusion-8seg.toml")).unwrap();
+    // The fusion-8seg flight on beast12 counters, with the 83 ns jitter.
+    let mut scenario = Scenario::load(&root().join("fixtures/scenarios/fusion-8seg-selfsync.toml")).unwrap();
     for r in &mut scenario.receiver {
         r.jitter_ns = 83.0;
     }
