@@ -45,13 +45,17 @@ fn methods_on_the_8_segment_flight_at_real_rates() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let s = Scenario::load(&root.join("fixtures/scenarios/fusion-8seg.toml")).unwrap();
     let cfg = Config::load(&root.join("fixtures/configs/every-transmission.toml")).unwrap();
-    let rows = monte_carlo(&s, &cfg.core, &[Method::Measurement], 1..13).unwrap();
+    let rows = monte_carlo(&s, &cfg.core, &[Method::Measurement, Method::Reweighted], 1..13).unwrap();
     eprintln!("{}", fuse1090::eval::montecarlo::table(&rows));
     let (adsb, mlat, fused) = (row(&rows, "adsb"), row(&rows, "mlat"), row(&rows, "fused/measurement"));
     assert!(fused.h_rmse_m < 5.0, "{}", fused.h_rmse_m);
     assert!(fused.h_rmse_m < 0.5 * mlat.h_rmse_m.min(adsb.h_rmse_m), "{fused:?} {mlat:?} {adsb:?}");
     let nees = fused.nees.unwrap();
     assert!((1.6..=2.5).contains(&nees), "measurement fusion NEES {nees}");
+    // The per-epoch N-run test (one sample per run every 2 s): fused inside
+    // on most epochs, the reweighted combination on almost none.
+    assert!(fused.epochs_in_band.unwrap() >= 0.8, "{fused:?}");
+    assert!(row(&rows, "fused/reweighted").epochs_in_band.unwrap() < 0.2);
 }
 
 /// The best RMSE a causal filter can expect on the 1 Hz benchmark if it is

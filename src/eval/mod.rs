@@ -114,6 +114,8 @@ struct Acc {
     h_err: Vec<f64>,
     v_err: Vec<f64>,
     nees: Vec<f64>,
+    /// Time of each NEES value.
+    nees_t: Vec<f64>,
     /// Horizontal Cramér-Rao variances (trace, m^2) of MLAT fixes.
     crb: Vec<f64>,
 }
@@ -157,6 +159,10 @@ pub struct Row {
     pub v_rmse_m: Option<f64>,
     pub nees: Option<f64>,
     pub nees_band: Option<[f64; 2]>,
+    /// Every NEES value with its time, for the Monte Carlo runner's
+    /// per-epoch test (samples of one run are correlated in time).
+    #[serde(skip)]
+    pub nees_samples: Vec<(f64, f64)>,
     pub continuity: f64,
     pub breaks: usize,
     pub false_tracks: usize,
@@ -280,6 +286,7 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
                 let det = a * d - b * cc;
                 if det > 0.0 {
                     acc.nees.push((d * e[0] * e[0] - (b + cc) * e[0] * e[1] + a * e[1] * e[1]) / det);
+                    acc.nees_t.push(t);
                 }
             }
         }
@@ -294,6 +301,7 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
         e.0.h_err.extend(acc.h_err);
         e.0.v_err.extend(acc.v_err);
         e.0.nees.extend(acc.nees);
+        e.0.nees_t.extend(acc.nees_t);
         e.0.crb.extend(acc.crb);
     }
     let make_row =
@@ -307,6 +315,7 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
             v_rmse_m: (!acc.v_err.is_empty()).then(|| rms(&acc.v_err)),
             nees: (!acc.nees.is_empty()).then(|| acc.nees.iter().sum::<f64>() / acc.nees.len() as f64),
             nees_band: (!acc.nees.is_empty()).then(|| nees_band(acc.nees.len(), 2.0)),
+            nees_samples: acc.nees_t.iter().copied().zip(acc.nees.iter().copied()).collect(),
             continuity: cont,
             breaks,
             false_tracks,
@@ -324,6 +333,7 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
         o.0.h_err.extend(&acc.h_err);
         o.0.v_err.extend(&acc.v_err);
         o.0.nees.extend(&acc.nees);
+        o.0.nees_t.extend(&acc.nees_t);
         o.0.crb.extend(&acc.crb);
         o.1 += 1;
         o.2 += cont;
