@@ -9,9 +9,15 @@
 use std::sync::Arc;
 
 use nalgebra::{DMatrix, Matrix6, Vector6};
+use smallvec::SmallVec;
 
 use super::kf::{Gaussian, Linear, PosMeasurement};
 use super::models::MotionModel;
+
+/// Per-model values, inline up to four models (the default set): a track
+/// keeps a copy of its filter for every measurement in its reorder window,
+/// and a heap allocation per copy cost more than the copy itself.
+pub type PerModel<T> = SmallVec<[T; 4]>;
 
 /// The models and their Markov switching matrix.
 #[derive(Clone, Debug, PartialEq)]
@@ -24,8 +30,8 @@ pub struct ImmSpec {
 #[derive(Clone, Debug)]
 pub struct Imm {
     pub spec: Arc<ImmSpec>,
-    pub filters: Vec<Gaussian>,
-    pub mu: Vec<f64>,
+    pub filters: PerModel<Gaussian>,
+    pub mu: PerModel<f64>,
 }
 
 /// What one IMM step produced.
@@ -47,7 +53,7 @@ impl Imm {
 
     pub fn with_spec(spec: Arc<ImmSpec>, init: Gaussian) -> Imm {
         let n = spec.models.len();
-        Imm { filters: vec![init; n], mu: vec![1.0 / n as f64; n], spec }
+        Imm { filters: smallvec::smallvec![init; n], mu: smallvec::smallvec![1.0 / n as f64; n], spec }
     }
 
     /// A transition matrix that stays with probability `stay` and moves to
@@ -69,13 +75,13 @@ impl Imm {
     /// predicting again.
     pub fn prepare(&self, dt: f64) -> Prepared {
         let (n, tr) = (self.spec.models.len(), &self.spec.transition);
-        let c: Vec<f64> = (0..n).map(|j| (0..n).map(|i| tr[(i, j)] * self.mu[i]).sum()).collect();
+        let c: PerModel<f64> = (0..n).map(|j| (0..n).map(|i| tr[(i, j)] * self.mu[i]).sum()).collect();
         let predicted = c
             .iter()
             .zip(&self.spec.models)
             .enumerate()
             .map(|(j, (cj, model))| {
-                let w: Vec<f64> = (0..n).map(|i| tr[(i, j)] * self.mu[i] / cj.max(1e-300)).collect();
+                let w: PerModel<f64> = (0..n).map(|i| tr[(i, j)] * self.mu[i] / cj.max(1e-300)).collect();
                 let mixed = combine(&self.filters, &w);
                 let (f, q) = model.transition_at(dt, &mixed.x);
                 mixed.predict(&f, &q)
@@ -127,8 +133,8 @@ impl Imm {
         nis: impl Fn(&Gaussian) -> f64,
     ) -> Option<Step> {
         let n = self.spec.models.len();
-        let mut post = Vec::with_capacity(n);
-        let mut lik = Vec::with_capacity(n);
+        let mut post = PerModel::with_capacity(n);
+        let mut lik = PerModel::<f64>::with_capacity(n);
         for (pred, cj) in p.predicted.iter().zip(&p.c) {
             let u = update(pred)?;
             post.push(u.post);
@@ -140,9 +146,9 @@ impl Imm {
         if !top.is_finite() {
             return None;
         }
-        let w: Vec<f64> = lik.iter().map(|l| (l - top).exp()).collect();
+        let w: PerModel<f64> = lik.iter().map(|l| (l - top).exp()).collect();
         let total: f64 = w.iter().sum();
-        let mu: Vec<f64> = w.iter().map(|x| x / total).collect();
+        let mu: PerModel<f64> = w.iter().map(|x| x / total).collect();
         // NIS of the combined prediction (the track's own consistency check).
         let nis = nis(&p.combined());
         let estimate = combine(&post, &mu);
@@ -158,8 +164,8 @@ impl Imm {
 /// A step's measurement-independent half (see [`Imm::prepare`]).
 #[derive(Clone, Debug)]
 pub struct Prepared {
-    c: Vec<f64>,
-    predicted: Vec<Gaussian>,
+    c: PerModel<f64>,
+    predicted: PerModel<Gaussian>,
 }
 
 impl Prepared {
