@@ -186,6 +186,6 @@ fn a_misplaced_receiver_is_excluded_and_a_restart_does_not_break_mlat() {
         (0..40).filter_map(|i| mlat.sync_nis(first + i).map(|r| (i, (r * 100.0).round() / 100.0))).collect();
     eprintln!("sync source mean NIS: {rates:?}");
     let refused: Vec<u32> =
-        (0..40).map(|i| first + i).filter(|&a| mlat.sync_banned(a) || core.fuser().is_suspect(a)).collect();
+        (0..40).map(|i| first + i).filter(|&a| mlat.sync_banned(a) || core.is_suspect(a)).collect();
     assert_eq!(refused, vec![first + 38, first + 39], "sync sources refused");
 }

@@ -10,7 +10,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 
 use crate::config::Config;
-use crate::core::Core;
+use crate::core::{Back, Cmd, Core};
 use crate::feed::capture::{CaptureReader, CaptureRecord};
 use crate::publish::json::write_event;
 
@@ -86,9 +86,11 @@ const BATCH: usize = 4096;
 
 /// Runs a capture file through the core and writes the event stream.
 ///
-/// Two threads, as the machine has two cores: one parses the capture into
-/// batches, the other runs the core and writes. Batches keep the file's
-/// order, so the output is the same bytes as a single-threaded run.
+/// Three threads for the machine's two cores: one parses the capture into
+/// batches, one runs the core's front stage (decoding, grouping, MLAT,
+/// conformance), one its back stage (tracking, fusion) and writes. Batches
+/// keep the file's order and nothing flows back from the back stage, so the
+/// output is the same bytes as a single-threaded run.
 pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summary> {
     let started = Instant::now();
     let file = File::open(capture).with_context(|| format!("cannot open {}", capture.display()))?;
@@ -111,47 +113,66 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
         }
         Ok((reader.skipped, reader.errors))
     });
-    let mut out = BufWriter::with_capacity(1 << 20, out_file);
     let mut core_cfg = cfg.core.clone();
     core_cfg.publish_source_tracks = cfg.publish_source_tracks;
-    let mut core = Core::new(&core_cfg);
-    let mut events = Vec::new();
+    let (mut front, mut back) = Core::stages(&core_cfg);
+    let (cmd_tx, cmd_rx) = std::sync::mpsc::sync_channel::<Vec<Cmd>>(8);
+    let writer = std::thread::spawn(move || -> (Back, Result<()>) {
+        let mut out = BufWriter::with_capacity(1 << 20, out_file);
+        let mut events = Vec::new();
+        let write = || -> Result<()> {
+            for cmds in cmd_rx {
+                back.apply(cmds, &mut events);
+                for ev in events.drain(..) {
+                    write_event(&mut out, &ev, |i| back.receiver_id(i)).context("writing output")?;
+                }
+            }
+            out.flush().context("writing output")
+        };
+        let res = write();
+        (back, res)
+    });
     let (mut first, mut last) = (f64::INFINITY, f64::NEG_INFINITY);
-    let flush = |events: &mut Vec<_>, core: &Core, out: &mut BufWriter<File>| -> Result<()> {
-        for ev in events.drain(..) {
-            write_event(out, &ev, |i| core.receiver_id(i)).context("writing output")?;
-        }
-        Ok(())
-    };
+    let mut cmds = Vec::new();
     for batch in rx {
         for rec in batch {
-            if let CaptureRecord::Frame(f) = &rec {
-                first = first.min(f.arrival);
-                last = last.max(f.arrival);
+            match rec {
+                CaptureRecord::Receiver(d) => {
+                    front.add_receiver(d, &mut cmds);
+                }
+                CaptureRecord::Frame(f) => {
+                    first = first.min(f.arrival);
+                    last = last.max(f.arrival);
+                    front.on_frame(f.rx, f.arrival, &f.frame, &mut cmds);
+                }
             }
-            core.on_record(rec, &mut events);
         }
-        flush(&mut events, &core, &mut out)?;
+        // A writer that stopped (an output error) says why when joined.
+        if cmd_tx.send(std::mem::take(&mut cmds)).is_err() {
+            break;
+        }
     }
     let (skipped, errors) = parser.join().map_err(|_| anyhow::anyhow!("capture reader panicked"))??;
-    core.finish(&mut events);
-    flush(&mut events, &core, &mut out)?;
-    out.flush().context("writing output")?;
-    eprintln!("{}", core.mlat().report(last, &|k| core.receiver_id(k).to_string()));
-    eprintln!("tracking: {:?}", core.fuser().stats());
+    front.finish(&mut cmds);
+    let _ = cmd_tx.send(cmds);
+    drop(cmd_tx);
+    let (back, written) = writer.join().map_err(|_| anyhow::anyhow!("tracking thread panicked"))?;
+    written?;
+    eprintln!("{}", front.mlat().report(last, &|k| front.receiver_id(k).to_string()));
+    eprintln!("tracking: {:?}", back.fuser().stats());
     for e in &errors {
         eprintln!("fuse1090: skipped {e}");
     }
     if skipped > errors.len() as u64 {
         eprintln!("fuse1090: ... {skipped} malformed lines skipped in all");
     }
-    let s = core.stats();
+    let s = front.stats();
     Ok(Summary {
         frames: s.frames,
         messages: s.messages,
-        aircraft: core.decoder().stats().aircraft_created,
+        aircraft: front.decoder().stats().aircraft_created,
         fixes: s.fixes,
-        tracks: core.fuser().stats().tracks_created,
+        tracks: back.fuser().stats().tracks_created,
         positions: s.positions,
         skipped_lines: skipped,
         span_s: if last >= first { last - first } else { 0.0 },

@@ -134,8 +134,8 @@ pub struct FuseStats {
     pub published: u64,
     /// Fusion of two tracks impossible (covariance, time): the better single track published.
     pub fusion_fallbacks: u64,
-    /// ADS-B/MLAT pairs judged by the conformance monitor, and flags raised.
-    pub conformance_checks: u64,
+    /// Conformance flags raised (the monitor itself runs in the core's
+    /// front stage, which also keeps flagged ADS-B out of clock sync).
     pub suspect_flags: u64,
     /// ADS-B measurements of flagged aircraft kept out of their fused track.
     pub suspect_excluded: u64,
@@ -171,7 +171,6 @@ struct Aircraft {
     motion_t: f64,
     in_conflict: bool,
     adsb_suspect: bool,
-    monitor: conformance::Monitor,
     surface: bool,
     cross: Cross,
 }
@@ -324,7 +323,6 @@ impl Fuser {
                     motion_t: f64::NEG_INFINITY,
                     in_conflict: false,
                     adsb_suspect: false,
-                    monitor: Default::default(),
                     surface: false,
                     cross: Cross::new(),
                 },
@@ -458,44 +456,27 @@ impl Fuser {
         self.on_measurement(g.addr, None, m, now, out);
     }
 
-    /// Whether the conformance monitor distrusts an aircraft's ADS-B.
-    pub fn is_suspect(&self, addr: u32) -> bool {
-        self.aircraft.get(&addr).is_some_and(|a| a.adsb_suspect)
-    }
-
-    /// An ADS-B position and the MLAT fix of the same transmission: east/north
-    /// difference (m, fix minus report) and the sum of their covariances.
-    pub fn on_conformance(
+    /// The conformance monitor's verdict on an aircraft's ADS-B changed
+    /// (`offset_m`, `nis`: the pair that changed it): its ADS-B is kept out
+    /// of (or let back into) the fused track, and an alert goes out.
+    pub fn set_suspect(
         &mut self,
         addr: u32,
         t: f64,
-        d: [f64; 2],
-        s: [[f64; 2]; 2],
+        suspect: bool,
+        offset_m: f64,
+        nis: f64,
         out: &mut Vec<Output>,
     ) {
         let Some(a) = self.aircraft.get_mut(&addr) else {
             return;
         };
-        self.stats.conformance_checks += 1;
-        if let Some(suspect) = a.monitor.push(&self.cfg.conformance, d, s) {
-            a.adsb_suspect = suspect;
-            self.stats.suspect_flags += suspect as u64;
-            if suspect {
-                tracing::warn!(
-                    hex = format!("{addr:06X}"),
-                    offset_m = a.monitor.last_offset_m,
-                    "ADS-B position contradicted by timing"
-                );
-            }
-            out.push(Output::Alert(Alert::AdsbSuspect {
-                t,
-                addr,
-                id: a.id,
-                suspect,
-                offset_m: a.monitor.last_offset_m,
-                nis: a.monitor.last_nis,
-            }));
+        a.adsb_suspect = suspect;
+        self.stats.suspect_flags += suspect as u64;
+        if suspect {
+            tracing::warn!(hex = format!("{addr:06X}"), offset_m, "ADS-B position contradicted by timing");
         }
+        out.push(Output::Alert(Alert::AdsbSuspect { t, addr, id: a.id, suspect, offset_m, nis }));
     }
 
     /// Pairs of confirmed tracks in predicted conflict; alerts on changes.

@@ -1,0 +1,98 @@
+//! The back stage of the core: tracking, fusion and alerts, driven by the
+//! front stage's commands. It reads nothing of the front, so the commands
+//! can be applied at once (one thread) or shipped to another thread in
+//! batches (`run --capture`) with the same result.
+
+use super::{event, Event};
+use crate::fuse::{Fuser, Output};
+use crate::mlat::engine::TdoaGroup;
+use crate::track::Measurement;
+
+/// What the front stage asks of the tracker, in the order it must happen.
+#[derive(Clone, Debug)]
+pub enum Cmd {
+    /// A receiver was declared (its id names it in MLAT records).
+    Receiver(String),
+    /// An event of the front stage (an ADS-B report, an MLAT fix), passed
+    /// through so the output keeps its order.
+    Event(Event),
+    /// A measurement of aircraft `addr`, at arrival time `now`.
+    Measure {
+        addr: u32,
+        nac_p: Option<u8>,
+        m: Measurement,
+        now: f64,
+    },
+    /// Time differences of a transmission too few receivers heard for a fix.
+    Tdoa {
+        g: TdoaGroup,
+        now: f64,
+    },
+    AltBaro {
+        addr: u32,
+        alt_ft: i32,
+    },
+    Squawk {
+        addr: u32,
+        squawk: u16,
+    },
+    Flight {
+        addr: u32,
+        flight: String,
+    },
+    /// The conformance monitor's verdict on an aircraft's ADS-B changed.
+    Suspect {
+        addr: u32,
+        t: f64,
+        suspect: bool,
+        offset_m: f64,
+        nis: f64,
+    },
+    /// Time moved forward (arrival-time scale).
+    Advance(f64),
+    /// End of input.
+    Finish,
+}
+
+pub struct Back {
+    fuser: Fuser,
+    receiver_ids: Vec<String>,
+    outputs: Vec<Output>,
+}
+
+impl Back {
+    pub fn new(fuser: Fuser) -> Back {
+        Back { fuser, receiver_ids: Vec::new(), outputs: Vec::new() }
+    }
+
+    pub fn fuser(&self) -> &Fuser {
+        &self.fuser
+    }
+
+    /// The id of receiver `rx`, for the records that name it.
+    pub fn receiver_id(&self, rx: usize) -> &str {
+        self.receiver_ids.get(rx).map_or("?", String::as_str)
+    }
+
+    /// Applies commands in order; the events they make go to `out`.
+    pub fn apply(&mut self, cmds: impl IntoIterator<Item = Cmd>, out: &mut Vec<Event>) {
+        for cmd in cmds {
+            let o = &mut self.outputs;
+            match cmd {
+                Cmd::Receiver(id) => self.receiver_ids.push(id),
+                Cmd::Event(e) => out.push(e),
+                Cmd::Measure { addr, nac_p, m, now } => self.fuser.on_measurement(addr, nac_p, m, now, o),
+                Cmd::Tdoa { g, now } => self.fuser.on_tdoa(&g, now, o),
+                Cmd::AltBaro { addr, alt_ft } => self.fuser.set_alt_baro(addr, alt_ft),
+                Cmd::Squawk { addr, squawk } => self.fuser.set_squawk(addr, squawk),
+                Cmd::Flight { addr, flight } => self.fuser.set_flight(addr, flight),
+                Cmd::Suspect { addr, t, suspect, offset_m, nis } => {
+                    self.fuser.set_suspect(addr, t, suspect, offset_m, nis, o)
+                }
+                Cmd::Advance(now) => self.fuser.advance(now, o),
+                Cmd::Finish => self.fuser.finish(o),
+            }
+            out.extend(self.outputs.drain(..).map(event));
+        }
+    }
+}

@@ -1,0 +1,454 @@
+//! The front stage of the core: receivers, grouping, decoding,
+//! multilateration and the conformance monitor. It owns everything the
+//! clock synchronisation depends on and hands the tracker its work as
+//! [`Cmd`]s, in order.
+//!
+//! Why the conformance monitor lives here and not beside the tracks: its
+//! verdict keeps a flagged aircraft's ADS-B out of clock synchronisation,
+//! which is decided frame by frame in this stage. With the monitor here,
+//! nothing flows back from the tracker, so the two stages can run on two
+//! threads and still produce exactly what one thread produces.
+
+use std::collections::HashMap;
+
+use super::back::Cmd;
+use super::{CoreConfig, CoreStats, Event, PositionReport};
+use crate::feed::capture::{ClockKind, ReceiverDecl};
+use crate::feed::RawFrame;
+use crate::fuse::conformance::{ConformanceConfig, Monitor};
+use crate::geo::geodetic_to_ecef;
+use crate::geo::{FT_TO_M, KT_TO_MS};
+use crate::mlat::group::{Added, Group, GroupInfo, Grouper};
+use crate::mlat::Mlat;
+use crate::modes::nic::{nacp_epu_m, nucp_hpl_m};
+use crate::modes::{Body, Decoder, DecoderConfig, Es};
+use crate::track::{Measurement, Observation, Source};
+
+struct RxState {
+    decl: ReceiverDecl,
+    frames: u64,
+}
+
+/// One aircraft's conformance monitor, forgotten when the aircraft is (as
+/// its track would be).
+struct Watched {
+    monitor: Monitor,
+    last_heard: f64,
+}
+
+/// What `on_group` needs besides the group, borrowed apart from the grouper.
+struct GroupCtx<'a> {
+    mlat: &'a mut Mlat,
+    watched: &'a mut HashMap<u32, Watched>,
+    stats: &'a mut CoreStats,
+    conformance: &'a ConformanceConfig,
+    sync_inflation: f64,
+}
+
+pub struct Front {
+    receivers: Vec<RxState>,
+    decoder: Decoder,
+    grouper: Grouper,
+    mlat: Mlat,
+    watched: HashMap<u32, Watched>,
+    conformance: ConformanceConfig,
+    drop_after_s: f64,
+    next_sweep: f64,
+    stats: CoreStats,
+    min_sync_nacp: u8,
+    baro_sigma_m: f64,
+    /// Time-of-applicability sigma of ADS-B positions: GPS-timed, arrival-timed (s).
+    time_sigma: (f64, f64),
+    sync_inflation: f64,
+}
+
+impl Front {
+    pub fn new(cfg: &CoreConfig) -> Self {
+        let dcfg = DecoderConfig {
+            reference: None,
+            max_range_m: cfg.max_range_km * 1000.0,
+            aircraft_ttl_s: cfg.aircraft_ttl_s,
+            ..Default::default()
+        };
+        Front {
+            receivers: Vec::new(),
+            decoder: Decoder::new(dcfg),
+            grouper: Grouper::new(cfg.group_wait_s, cfg.max_pending_groups),
+            mlat: Mlat::new(cfg.mlat.clone()),
+            watched: HashMap::new(),
+            conformance: cfg.fuse.conformance.clone(),
+            drop_after_s: cfg.track.drop_after_s,
+            next_sweep: f64::NEG_INFINITY,
+            stats: CoreStats::default(),
+            min_sync_nacp: cfg.mlat.min_sync_nacp,
+            baro_sigma_m: cfg.mlat.baro_sigma_m,
+            time_sigma: (cfg.track.adsb_time_sigma_gps_s, cfg.track.adsb_time_sigma_arrival_s),
+            sync_inflation: cfg.track.mlat_sync_inflation,
+        }
+    }
+
+    pub fn add_receiver(&mut self, decl: ReceiverDecl, cmds: &mut Vec<Cmd>) -> usize {
+        self.mlat.add_receiver(&decl);
+        cmds.push(Cmd::Receiver(decl.id.clone()));
+        self.receivers.push(RxState { decl, frames: 0 });
+        self.receivers.len() - 1
+    }
+
+    pub fn receiver_id(&self, rx: usize) -> &str {
+        self.receivers.get(rx).map_or("?", |r| r.decl.id.as_str())
+    }
+
+    pub fn receivers(&self) -> impl Iterator<Item = (&ReceiverDecl, u64)> {
+        self.receivers.iter().map(|r| (&r.decl, r.frames))
+    }
+
+    pub fn stats(&self) -> &CoreStats {
+        &self.stats
+    }
+
+    pub fn decoder(&self) -> &Decoder {
+        &self.decoder
+    }
+
+    pub fn grouper(&self) -> &Grouper {
+        &self.grouper
+    }
+
+    pub fn mlat(&self) -> &Mlat {
+        &self.mlat
+    }
+
+    /// Whether the conformance monitor distrusts an aircraft's ADS-B.
+    pub fn is_suspect(&self, addr: u32) -> bool {
+        self.watched.get(&addr).is_some_and(|w| w.monitor.suspect)
+    }
+
+    fn ctx(&mut self) -> (&mut Grouper, GroupCtx<'_>) {
+        (
+            &mut self.grouper,
+            GroupCtx {
+                mlat: &mut self.mlat,
+                watched: &mut self.watched,
+                stats: &mut self.stats,
+                conformance: &self.conformance,
+                sync_inflation: self.sync_inflation,
+            },
+        )
+    }
+
+    /// Moves time forward to `now` (arrival-time scale): groups whose wait
+    /// ran out are processed; the tracker is told the time.
+    pub fn advance(&mut self, now: f64, cmds: &mut Vec<Cmd>) {
+        let (grouper, mut ctx) = self.ctx();
+        grouper.advance(now, &mut |g: Group| ctx.on_group(&g, now, cmds));
+        if now >= self.next_sweep {
+            self.next_sweep = now + 1.0;
+            let drop = self.drop_after_s;
+            self.watched.retain(|_, w| now - w.last_heard <= drop);
+        }
+        cmds.push(Cmd::Advance(now));
+    }
+
+    /// End of input: everything pending is processed.
+    pub fn finish(&mut self, cmds: &mut Vec<Cmd>) {
+        let (grouper, mut ctx) = self.ctx();
+        grouper.flush(&mut |g: Group| {
+            let now = g.first_arrival;
+            ctx.on_group(&g, now, cmds)
+        });
+        cmds.push(Cmd::Finish);
+    }
+
+    /// One frame from receiver `rx`, arrived at `arrival` (Unix s).
+    pub fn on_frame(&mut self, rx: usize, arrival: f64, frame: &RawFrame, cmds: &mut Vec<Cmd>) {
+        self.stats.frames += 1;
+        let Some(r) = self.receivers.get_mut(rx) else {
+            self.stats.unknown_receiver += 1;
+            return;
+        };
+        if !arrival.is_finite() {
+            self.stats.bad_time += 1;
+            return;
+        }
+        r.frames += 1;
+        if frame.is_mode_ac() {
+            self.stats.mode_ac += 1;
+            return;
+        }
+        self.advance(arrival, cmds);
+        let (grouper, mut ctx) = self.ctx();
+        match grouper.add(rx, arrival, frame, &mut |g: Group| ctx.on_group(&g, arrival, cmds)) {
+            Added::New => {}
+            Added::Joined => return,
+            Added::Duplicate => {
+                self.stats.duplicates += 1;
+                return;
+            }
+        }
+        let decl = &self.receivers[rx].decl;
+        let Ok(d) = self.decoder.decode_at(frame, arrival, Some((decl.lat, decl.lon))) else {
+            return;
+        };
+        self.stats.messages += 1;
+        let mut info = GroupInfo {
+            decoded: true,
+            df: d.msg.df,
+            addr: d.msg.addr,
+            addr_known: d.trusted(),
+            ..Default::default()
+        };
+        match d.msg.body {
+            Body::AirAir { alt_ft, .. } | Body::Altitude { alt_ft, .. } => info.alt_baro_ft = alt_ft,
+            Body::Extended(es) => {
+                if let Es::AirbornePosition { alt_ft, gnss: false, .. } = es.kind {
+                    info.alt_baro_ft = alt_ft;
+                }
+            }
+            _ => {}
+        }
+        // Only extended squitters (positions, velocities) need their time of
+        // applicability: worked out once, and only for them.
+        let timing = matches!(d.msg.body, Body::Extended(_)).then(|| self.frame_time(rx, arrival, frame));
+        let report = timing.and_then(|timing| self.position_report(rx, timing, &d));
+        // A monitored aircraft is heard: it stays monitored (as its track stays).
+        info.suspect = match (self.watched.get_mut(&d.msg.addr), d.trusted()) {
+            (Some(w), true) => {
+                w.last_heard = arrival;
+                w.monitor.suspect
+            }
+            (w, _) => w.is_some_and(|w| w.monitor.suspect),
+        };
+        info.report = report.as_ref().and_then(|p| Some((p.lat, p.lon, p.sigma_m?)));
+        if let Some(p) = &report {
+            // This transmission's own position: a clock synchronisation source.
+            if let (Some(alt), Some(sigma), false) = (p.alt_m, p.sigma_m, p.surface) {
+                if p.nac_p.unwrap_or(0) >= self.min_sync_nacp {
+                    info.adsb_ecef = Some(geodetic_to_ecef(p.lat, p.lon, alt));
+                    info.adsb_sigma_m = sigma;
+                }
+            }
+        }
+        self.grouper.set_newest_info(info);
+        if let Some(p) = report {
+            // The report goes out before what the tracker makes of it.
+            self.stats.positions += 1;
+            cmds.push(Cmd::Event(Event::Position(p)));
+        }
+        self.feed_tracker(cmds, arrival, timing, &d, report.as_ref());
+    }
+
+    /// Time of applicability of a frame: exact for GPS-timed receivers, and
+    /// for counter-timed ones synchronised with a GPS-timed one (within a
+    /// microsecond); the arrival time otherwise.
+    fn frame_time(&mut self, rx: usize, arrival: f64, frame: &RawFrame) -> (f64, bool) {
+        match self.receivers[rx].decl.clock {
+            ClockKind::Gps if frame.has_timing() => (ClockKind::gps_unix(frame.timestamp, arrival), true),
+            ClockKind::Beast12 if frame.has_timing() => {
+                match self.mlat.gps_time_of(rx, frame.timestamp, arrival) {
+                    // Sane only: within a second of the arrival, converted to a microsecond.
+                    Some((t, var)) if var < 1e-12 && (arrival - t).abs() < 1.0 => (t, true),
+                    _ => (arrival, false),
+                }
+            }
+            _ => (arrival, false),
+        }
+    }
+
+    /// What a decoded frame tells the tracker: positions, velocities,
+    /// altitudes, and identity.
+    /// `timing`: the frame's time of applicability, for extended squitters.
+    fn feed_tracker(
+        &mut self,
+        cmds: &mut Vec<Cmd>,
+        arrival: f64,
+        timing: Option<(f64, bool)>,
+        d: &crate::modes::Decoded,
+        report: Option<&PositionReport>,
+    ) {
+        if !d.trusted() {
+            return;
+        }
+        let addr = d.msg.addr;
+        let tcfg = self.time_sigma;
+        let baro_sigma_m = self.baro_sigma_m;
+        let out = &mut *cmds;
+        if let Some(p) = report {
+            let Some(sigma) = p.sigma_m else {
+                self.stats.untracked_positions += 1;
+                return;
+            };
+            let time_sigma_s = if p.gps_timed { tcfg.0 } else { tcfg.1 };
+            let m = Measurement {
+                t: p.t,
+                source: Source::Adsb,
+                obs: Observation::Position {
+                    lat: p.lat,
+                    lon: p.lon,
+                    cov_en: nalgebra::Matrix2::identity() * sigma * sigma,
+                    height: p.alt_m.zip(p.alt_sigma_m.map(|s| s * s)),
+                    time_sigma_s,
+                    surface: p.surface,
+                },
+            };
+            out.push(Cmd::Measure { addr, nac_p: p.nac_p, m, now: arrival });
+            if let Some(alt_ft) = p.alt_baro_ft {
+                out.push(Cmd::AltBaro { addr, alt_ft });
+            }
+            return;
+        }
+        let baro_height = |alt_ft: i32| {
+            let diff = d.gnss_baro_diff_ft;
+            let sigma = if diff.is_some() { 8.0 } else { baro_sigma_m };
+            ((alt_ft + diff.unwrap_or(0)) as f64 * FT_TO_M, sigma * sigma)
+        };
+        match d.msg.body {
+            Body::AirAir { alt_ft: Some(a), .. } | Body::Altitude { alt_ft: Some(a), .. } => {
+                let (h, var) = baro_height(a);
+                let m = Measurement { t: arrival, source: Source::Mlat, obs: Observation::Height { h, var } };
+                out.push(Cmd::Measure { addr, nac_p: None, m, now: arrival });
+                out.push(Cmd::AltBaro { addr, alt_ft: a });
+            }
+            Body::Identity { squawk, .. } => out.push(Cmd::Squawk { addr, squawk }),
+            Body::Extended(es) => match es.kind {
+                Es::Identification { callsign, .. } => out.push(Cmd::Flight {
+                    addr,
+                    flight: crate::modes::fields::callsign_str(&callsign).to_string(),
+                }),
+                Es::Emergency { squawk, .. } => out.push(Cmd::Squawk { addr, squawk }),
+                Es::Velocity(v) => {
+                    let (Some(ve), Some(vn), Some((t_frame, _))) = (v.ve_kt, v.vn_kt, timing) else {
+                        return;
+                    };
+                    // NACv: 95% bounds of horizontal (m/s) and vertical (ft/s) velocity error.
+                    let (h95, v95_fps) = match v.nac_v {
+                        4 => (0.3, 1.5),
+                        3 => (1.0, 5.0),
+                        2 => (3.0, 15.0),
+                        1 => (10.0, 50.0),
+                        _ => (30.0, 100.0),
+                    };
+                    // Plus the 1 kt (or 4 kt supersonic) and 64 ft/min resolution.
+                    let step = if v.subtype == 2 { 4.0 } else { 1.0 } * KT_TO_MS;
+                    let hv = (h95 / 2.448f64).powi(2) + step * step / 12.0;
+                    let climb = v.vrate_fpm.map(|r| {
+                        let s = v95_fps * FT_TO_M / 1.96;
+                        (r as f64 * FT_TO_M / 60.0, s * s + (64.0 * FT_TO_M / 60.0).powi(2) / 12.0)
+                    });
+                    let m = Measurement {
+                        t: t_frame,
+                        source: Source::Adsb,
+                        obs: Observation::Velocity {
+                            v_en: nalgebra::Vector2::new(ve * KT_TO_MS, vn * KT_TO_MS),
+                            cov: nalgebra::Matrix2::identity() * hv,
+                            climb,
+                        },
+                    };
+                    out.push(Cmd::Measure { addr, nac_p: None, m, now: arrival });
+                }
+                Es::AirbornePosition { alt_ft: Some(a), gnss: false, .. } => {
+                    out.push(Cmd::AltBaro { addr, alt_ft: a })
+                }
+                _ => {}
+            },
+            _ => {}
+        }
+    }
+
+    /// The ADS-B position report of a decoded frame, if it has a published position.
+    fn position_report(
+        &self,
+        rx: usize,
+        (t, gps_timed): (f64, bool),
+        d: &crate::modes::Decoded,
+    ) -> Option<PositionReport> {
+        let (Some(p), Body::Extended(es)) = (d.position.filter(|p| p.reliable), d.msg.body) else {
+            return None;
+        };
+        let (alt_m, alt_baro_ft, alt_sigma_m) = match es.kind {
+            Es::AirbornePosition { alt_ft: Some(a), gnss: true, .. } => {
+                (Some(a as f64 * FT_TO_M), None, Some(15.0))
+            }
+            Es::AirbornePosition { alt_ft: Some(a), gnss: false, .. } => (
+                Some((a + d.gnss_baro_diff_ft.unwrap_or(0)) as f64 * FT_TO_M),
+                Some(a),
+                Some(if d.gnss_baro_diff_ft.is_some() { 8.0 } else { self.baro_sigma_m }),
+            ),
+            _ => (None, None, None),
+        };
+        // EPU is a 95% radius: per-axis sigma = EPU / 2.448. Version 0 reports
+        // NUCp, whose 95% accuracy bound is about half its protection limit.
+        let epu = match d.nac_p.filter(|&n| n > 0) {
+            Some(n) => nacp_epu_m(n),
+            None => d.nuc_p.and_then(nucp_hpl_m).map(|h| h / 2.0),
+        };
+        Some(PositionReport {
+            addr: d.msg.addr,
+            t,
+            lat: p.lat,
+            lon: p.lon,
+            alt_m,
+            alt_baro_ft,
+            alt_sigma_m,
+            nac_p: d.nac_p,
+            sigma_m: epu.map(|e| e / 2.448),
+            gps_timed,
+            surface: p.surface,
+            rx,
+        })
+    }
+}
+
+impl GroupCtx<'_> {
+    fn on_group(&mut self, g: &Group, now: f64, cmds: &mut Vec<Cmd>) {
+        let Some(fix) = self.mlat.on_group(g, now) else {
+            if let Some(t) = self.mlat.take_tdoa() {
+                cmds.push(Cmd::Tdoa { g: t, now });
+            }
+            return;
+        };
+        self.stats.fixes += 1;
+        let c = fix.cov_en;
+        // Synchronisation errors persist from fix to fix; a filter that took
+        // them as white would average them away and claim too much.
+        let inflation = 1.0 + fix.sync_share * (self.sync_inflation - 1.0);
+        let m = Measurement {
+            t: fix.t,
+            source: Source::Mlat,
+            obs: Observation::Position {
+                lat: fix.lat,
+                lon: fix.lon,
+                cov_en: nalgebra::Matrix2::new(c[0][0], c[0][1], c[1][0], c[1][1]) * inflation,
+                // Heights come from altitude reports: a fix's own height is
+                // either the barometric one it was given, or (without one)
+                // so poorly determined that its linearised sigma cannot be
+                // trusted (hundreds of metres off at 20 m sigma on the surface).
+                height: None,
+                time_sigma_s: 0.0,
+                surface: false,
+            },
+        };
+        let (addr, t) = (fix.addr, fix.t);
+        let conformance = (g.info.report, fix.dof >= 1 && fix.chi2 <= 3.0);
+        let d = conformance
+            .0
+            .map(|(lat, lon, _)| crate::track::plane::Plane::new(lat, lon, 0.0).to_en(fix.lat, fix.lon));
+        cmds.push(Cmd::Event(Event::Mlat(fix)));
+        if let (Some((_, _, sigma)), true, Some(d)) = (conformance.0, conformance.1, d) {
+            // The same transmission's ADS-B position against its fix.
+            let v = sigma * sigma;
+            let s = [
+                [v + c[0][0] * inflation, c[0][1] * inflation],
+                [c[1][0] * inflation, v + c[1][1] * inflation],
+            ];
+            self.stats.conformance_checks += 1;
+            let w =
+                self.watched.entry(addr).or_insert(Watched { monitor: Monitor::default(), last_heard: now });
+            w.last_heard = now;
+            if let Some(suspect) = w.monitor.push(self.conformance, d, s) {
+                let (offset_m, nis) = (w.monitor.last_offset_m, w.monitor.last_nis);
+                cmds.push(Cmd::Suspect { addr, t, suspect, offset_m, nis });
+            }
+        }
+        cmds.push(Cmd::Measure { addr, nac_p: None, m, now });
+    }
+}
