@@ -2,9 +2,10 @@
 //! sans-IO core as `run --capture`, datagrams out.
 //!
 //! Shaped like mini-redis: a tokio runtime owns the sockets (one task per
-//! input, see [`inputs`]) and the signals; the core runs on its own thread,
-//! fed through one bounded queue, and owns the outputs, so the processing is
-//! exactly the offline pipeline with the system clock as its time. SIGTERM
+//! input, see [`inputs`]) and the signals; the core runs on two threads of
+//! its own, as `run --capture` does (its front stage fed through one bounded
+//! queue, its back stage owning the outputs), so the processing is exactly
+//! the offline pipeline with the system clock as its time. SIGTERM
 //! and SIGINT stop the inputs, let the core publish what it holds and end
 //! within two seconds; SIGHUP re-reads the configuration and replaces
 //! receivers (added, never renumbered), inputs and outputs while the core,
@@ -25,7 +26,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 
 use crate::config::Config;
-use crate::core::{Core, Event};
+use crate::core::{Back, Cmd, Core, CoreStats, Event, Front};
 use crate::feed::capture::{CaptureWriter, ReceiverDecl};
 use crate::feed::RawFrame;
 use inputs::Registry;
@@ -161,30 +162,60 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
     Ok(())
 }
 
-/// The core thread: frames in, events out to the outputs, stats and watchdog.
+/// What the front thread tells the back thread: the commands of a batch
+/// and the time they were made, or new outputs (SIGHUP).
+enum ToBack {
+    Batch { cmds: Vec<Cmd>, now: f64, front: FrontSnapshot },
+    Outputs(Outputs),
+}
+
+/// The front stage's counters, sent with each batch for the stats line and
+/// the metrics, which the back thread writes (it knows the tracks).
+#[derive(Clone, Copy, Default)]
+struct FrontSnapshot {
+    stats: CoreStats,
+    aircraft: u64,
+    mlat_fixes: u64,
+    dispatched: u64,
+}
+
+/// Batches between the two stages: bounded, so a stalled tracker stops
+/// the front, whose input queue then drops (and counts) what it cannot take.
+const STAGE_QUEUE: usize = 64;
+
+/// The core's front thread: frames in, commands to the back thread, the
+/// recording, and the watchdog (a stalled back thread blocks it too).
 fn core_loop(
     cfg: crate::core::CoreConfig,
     decls: Vec<ReceiverDecl>,
-    mut outputs: Outputs,
+    outputs: Outputs,
     mut recorder: Option<CaptureWriter<std::io::BufWriter<std::fs::File>>>,
     rx: Receiver<ToCore>,
     registry: Arc<Registry>,
     stats_every: f64,
 ) {
-    let mut core = Core::new(&cfg);
+    let (mut front, back) = Core::stages(&cfg);
+    let mut cmds = Vec::new();
     for d in decls {
         if let Some(r) = &mut recorder {
             let _ = r.receiver(&d);
         }
-        core.add_receiver(d);
+        front.add_receiver(d, &mut cmds);
     }
-    let mut events: Vec<Event> = Vec::new();
+    let (to_back, from_front) = sync_channel::<ToBack>(STAGE_QUEUE);
+    let back_thread = std::thread::Builder::new()
+        .name("tracker".into())
+        .spawn(move || back_loop(back, outputs, from_front, registry, stats_every))
+        .expect("cannot start the tracker thread");
     let watchdog = sd_notify::watchdog_enabled();
     let mut last_ping = Instant::now();
-    let mut next_metrics = 0.0;
-    let mut next_stats = unix_now() + stats_every;
-    let mut last = unix_now();
     let mut dispatched = 0u64;
+    let snapshot = |front: &Front, dispatched| FrontSnapshot {
+        stats: *front.stats(),
+        aircraft: front.decoder().stats().aircraft_created,
+        mlat_fixes: front.mlat().stats.fixes,
+        dispatched,
+    };
     'run: loop {
         let first = rx.recv_timeout(Duration::from_millis(10));
         let mut msg = match first {
@@ -200,16 +231,20 @@ fn core_loop(
                     if let Some(w) = &mut recorder {
                         let _ = w.frame(arrival, r, &frame);
                     }
-                    core.on_frame(r, arrival, &frame, &mut events);
+                    front.on_frame(r, arrival, &frame, &mut cmds);
                     dispatched += 1;
                 }
                 ToCore::AddReceiver(d) => {
                     if let Some(w) = &mut recorder {
                         let _ = w.receiver(&d);
                     }
-                    core.add_receiver(d);
+                    front.add_receiver(d, &mut cmds);
                 }
-                ToCore::Outputs(o) => outputs = o,
+                ToCore::Outputs(o) => {
+                    if to_back.send(ToBack::Outputs(o)).is_err() {
+                        break 'run;
+                    }
+                }
                 ToCore::Shutdown => break 'run,
             }
             n += 1;
@@ -220,34 +255,72 @@ fn core_loop(
             }
         }
         let now = unix_now();
-        core.advance(now, &mut events);
-        outputs.publish(&events, |i| core.receiver_id(i), now);
-        events.clear();
+        front.advance(now, &mut cmds);
+        let batch =
+            ToBack::Batch { cmds: std::mem::take(&mut cmds), now, front: snapshot(&front, dispatched) };
+        if to_back.send(batch).is_err() {
+            break;
+        }
         if watchdog.is_some_and(|w| last_ping.elapsed() * 2 >= w) {
             let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
             last_ping = Instant::now();
         }
+    }
+    front.finish(&mut cmds);
+    let _ = to_back.send(ToBack::Batch { cmds, now: unix_now(), front: snapshot(&front, dispatched) });
+    drop(to_back);
+    if back_thread.join().is_err() {
+        tracing::error!("the tracker thread panicked");
+    }
+    if let Some(w) = recorder {
+        let _ = w.into_inner().into_inner().map(|f| f.sync_all());
+    }
+}
+
+/// The core's back thread: commands in, tracks and alerts out to the
+/// outputs (with the front's events, in order), stats and metrics.
+fn back_loop(
+    mut back: Back,
+    mut outputs: Outputs,
+    rx: Receiver<ToBack>,
+    registry: Arc<Registry>,
+    stats_every: f64,
+) {
+    let mut events: Vec<Event> = Vec::new();
+    let mut front = FrontSnapshot::default();
+    let mut next_metrics = 0.0;
+    let mut next_stats = unix_now() + stats_every;
+    let mut last = unix_now();
+    for msg in rx {
+        let (cmds, now) = match msg {
+            ToBack::Outputs(o) => {
+                outputs = o;
+                continue;
+            }
+            ToBack::Batch { cmds, now, front: f } => {
+                front = f;
+                (cmds, now)
+            }
+        };
+        back.apply(cmds, &mut events);
+        outputs.publish(&events, |i| back.receiver_id(i), now);
+        events.clear();
         if now >= next_stats {
-            stats_line(&core, &registry, &outputs, now - last);
+            stats_line(&front, &back, &registry, &outputs, now - last);
             next_stats = now + stats_every;
             last = now;
         }
         if now >= next_metrics {
-            metrics(&core, &registry, &outputs, dispatched);
+            metrics(&front, &back, &registry, &outputs);
             next_metrics = now + 1.0;
         }
     }
-    core.finish(&mut events);
-    outputs.publish(&events, |i| core.receiver_id(i), unix_now());
-    if let Some(w) = recorder {
-        let _ = w.into_inner().into_inner().map(|f| f.sync_all());
-    }
-    stats_line(&core, &registry, &outputs, unix_now() - last);
+    stats_line(&front, &back, &registry, &outputs, unix_now() - last);
 }
 
-fn stats_line(core: &Core, reg: &Registry, outputs: &Outputs, span_s: f64) {
-    let s = core.stats();
-    let f = core.fuser().stats();
+fn stats_line(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outputs, span_s: f64) {
+    let s = &front.stats;
+    let f = back.fuser().stats();
     let per_rx: Vec<String> = reg
         .receivers
         .read()
@@ -271,8 +344,8 @@ fn stats_line(core: &Core, reg: &Registry, outputs: &Outputs, span_s: f64) {
         s.frames,
         per_rx.join(" "),
         s.messages,
-        core.decoder().stats().aircraft_created,
-        core.fuser().tracks(),
+        front.aircraft,
+        back.fuser().tracks(),
         s.fixes,
         s.fixes as f64 / span_s.max(1e-9),
         f.suspect_flags,
@@ -280,17 +353,17 @@ fn stats_line(core: &Core, reg: &Registry, outputs: &Outputs, span_s: f64) {
         reg.unknown_senders.load(Ordering::Relaxed),
         reg.queue_drops.load(Ordering::Relaxed),
         out_err,
-        core.mlat().stats.fixes,
+        front.mlat_fixes,
     );
 }
 
-fn metrics(core: &Core, reg: &Registry, outputs: &Outputs, dispatched: u64) {
-    let s = core.stats();
+fn metrics(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outputs) {
+    let s = &front.stats;
     metrics::counter!("fuse1090_frames_total").absolute(s.frames);
-    metrics::counter!("fuse1090_frames_dispatched_total").absolute(dispatched);
+    metrics::counter!("fuse1090_frames_dispatched_total").absolute(front.dispatched);
     metrics::counter!("fuse1090_messages_total").absolute(s.messages);
     metrics::counter!("fuse1090_mlat_fixes_total").absolute(s.fixes);
-    metrics::gauge!("fuse1090_tracks").set(core.fuser().tracks() as f64);
+    metrics::gauge!("fuse1090_tracks").set(back.fuser().tracks() as f64);
     metrics::counter!("fuse1090_unknown_senders_total").absolute(reg.unknown_senders.load(Ordering::Relaxed));
     metrics::counter!("fuse1090_queue_drops_total").absolute(reg.queue_drops.load(Ordering::Relaxed));
     for (r, c) in reg.receivers.read().expect("registry").iter() {
@@ -302,7 +375,7 @@ fn metrics(core: &Core, reg: &Registry, outputs: &Outputs, dispatched: u64) {
         metrics::counter!("fuse1090_receiver_throttled_total", "receiver" => id)
             .absolute(c.throttled.load(Ordering::Relaxed));
     }
-    let f = core.fuser().stats();
+    let f = back.fuser().stats();
     metrics::counter!("fuse1090_tracks_published_total").absolute(f.published);
     metrics::counter!("fuse1090_adsb_suspect_flags_total").absolute(f.suspect_flags);
     metrics::counter!("fuse1090_output_errors_total").absolute(outputs.dests.iter().map(|d| d.errors).sum());
