@@ -237,6 +237,13 @@ pub enum Stage {
 const BIASED_HEIGHT_VAR: f64 = 40.0 * 40.0;
 /// Past this distance from its plane's origin a track moves the origin (m).
 const RECENTRE_M: f64 = 20_000.0;
+/// Most measurements kept for re-runs, whatever the reorder window: an
+/// aircraft sends about seven a second (positions, velocities, fixes,
+/// altitudes), so 24 cover the default 2 s window with room; a flood of
+/// one aircraft's data (a replay run fast, a looping feed) cannot grow a
+/// track's memory beyond this (each entry holds a copy of the filter, 1.7 kB).
+const MAX_HISTORY: usize = 24;
+
 /// Initial velocity uncertainty without a velocity report (m/s, 1 sigma).
 const INIT_SPEED_SIGMA: f64 = 150.0;
 const INIT_ACCEL_SIGMA: f64 = 2.0;
@@ -338,7 +345,7 @@ impl Track {
             self.record_hit(matches!(outcome, Outcome::Applied { .. } | Outcome::Restarted), m.t);
         }
         let horizon = self.state.t - self.cfg.reorder_window_s;
-        while self.history.len() > 1 && self.history[1].0.t < horizon {
+        while self.history.len() > 1 && self.history[1].0.t < horizon || self.history.len() > MAX_HISTORY {
             self.history.pop_front();
         }
         outcome
