@@ -2,8 +2,8 @@
 //! receivers, 3,000 aircraft), cut to its first 10 s so one iteration stays
 //! around a second: 1.2 M frames.
 //! - `core`: frames already parsed, through the sans-IO core (frames/s);
-//! - `run_capture`: the `run --capture` command itself (file in, parsing on a
-//!   second thread, core, JSON lines out).
+//! - `run_capture`: the `run --capture` command itself (file in, parsing,
+//!   the core's front and back stages on threads of their own, JSON lines out).
 //!
 //! Run: `cargo bench --bench pipeline`.
 
