@@ -86,8 +86,10 @@ impl Imm {
                 let (f, q) = model.transition_at(dt, &mixed.x);
                 mixed.predict(&f, &q)
             })
-            .collect();
-        Prepared { c, predicted }
+            .collect::<PerModel<Gaussian>>();
+        // Every caller needs it (gate, NIS, linearisation): computed once.
+        let combined = combine(&predicted, &c);
+        Prepared { c, predicted, combined }
     }
 
     /// The combined prediction over `dt`, without changing the filter.
@@ -166,12 +168,13 @@ impl Imm {
 pub struct Prepared {
     c: PerModel<f64>,
     predicted: PerModel<Gaussian>,
+    combined: Gaussian,
 }
 
 impl Prepared {
     /// The moment-matched combined prediction.
     pub fn combined(&self) -> Gaussian {
-        combine(&self.predicted, &self.c)
+        self.combined
     }
 }
 

@@ -592,7 +592,7 @@ impl Track {
                 if self.keep_gain {
                     self.gain = gain(&pred, &step.estimate).map(|a| (t, a));
                 }
-                self.maybe_recentre();
+                self.maybe_recentre(&step.estimate.x);
                 Outcome::Applied { nis: step.nis }
             }
             None => {
@@ -616,11 +616,11 @@ impl Track {
         self.state.gated_in_a_row = 0;
     }
 
-    fn maybe_recentre(&mut self) {
+    /// `x`: the filter's newest combined estimate.
+    fn maybe_recentre(&mut self, x: &Vector6<f64>) {
         let (Some(plane), Some(imm)) = (self.state.plane, self.state.imm.as_mut()) else {
             return;
         };
-        let x = imm.estimate().x;
         if x[0].hypot(x[1]) < RECENTRE_M {
             return;
         }
