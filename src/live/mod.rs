@@ -203,10 +203,17 @@ fn core_loop(
         front.add_receiver(d, &mut cmds);
     }
     let (to_back, from_front) = sync_channel::<ToBack>(STAGE_QUEUE);
-    let back_thread = std::thread::Builder::new()
+    let back_thread = match std::thread::Builder::new()
         .name("tracker".into())
         .spawn(move || back_loop(back, outputs, from_front, registry, stats_every))
-        .expect("cannot start the tracker thread");
+    {
+        Ok(h) => h,
+        Err(e) => {
+            // Dropping the queue's receiver tells the inputs the core is gone.
+            tracing::error!("cannot start the tracker thread: {e}");
+            return;
+        }
+    };
     let watchdog = sd_notify::watchdog_enabled();
     let mut last_ping = Instant::now();
     let mut dispatched = 0u64;
