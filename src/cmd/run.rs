@@ -148,7 +148,10 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
             }
         }
         // A writer that stopped (an output error) says why when joined.
-        if cmd_tx.send(std::mem::take(&mut cmds)).is_err() {
+        // The next batch's buffer at this one's size: growing a vector of
+        // commands from empty every batch cost more than the commands' moves.
+        let cap = cmds.len();
+        if cmd_tx.send(std::mem::replace(&mut cmds, Vec::with_capacity(cap))).is_err() {
             break;
         }
     }

@@ -54,6 +54,8 @@ pub struct Front {
     conformance: ConformanceConfig,
     drop_after_s: f64,
     next_sweep: f64,
+    /// The time of the last `Cmd::Advance`.
+    advanced_to: f64,
     stats: CoreStats,
     min_sync_nacp: u8,
     baro_sigma_m: f64,
@@ -79,6 +81,7 @@ impl Front {
             conformance: cfg.fuse.conformance.clone(),
             drop_after_s: cfg.track.drop_after_s,
             next_sweep: f64::NEG_INFINITY,
+            advanced_to: f64::NAN,
             stats: CoreStats::default(),
             min_sync_nacp: cfg.mlat.min_sync_nacp,
             baro_sigma_m: cfg.mlat.baro_sigma_m,
@@ -146,7 +149,11 @@ impl Front {
             let drop = self.drop_after_s;
             self.watched.retain(|_, w| now - w.last_heard <= drop);
         }
-        cmds.push(Cmd::Advance(now));
+        // Advancing the tracker again to the same time changes nothing.
+        if now != self.advanced_to {
+            self.advanced_to = now;
+            cmds.push(Cmd::Advance(now));
+        }
     }
 
     /// End of input: everything pending is processed.
