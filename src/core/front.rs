@@ -435,13 +435,13 @@ impl GroupCtx<'_> {
             },
         };
         let (addr, t) = (fix.addr, fix.t);
-        let conformance = (g.info.report, fix.dof >= 1 && fix.chi2 <= 3.0);
-        let d = conformance
-            .0
-            .map(|(lat, lon, _)| crate::track::plane::Plane::new(lat, lon, 0.0).to_en(fix.lat, fix.lon));
+        // The same transmission's ADS-B position against its fix, when the
+        // fix has redundancy and fits its own timing.
+        let pair = g.info.report.filter(|_| fix.dof >= 1 && fix.chi2 <= 3.0).map(|(lat, lon, sigma)| {
+            (crate::track::plane::Plane::new(lat, lon, 0.0).to_en(fix.lat, fix.lon), sigma)
+        });
         cmds.push(Cmd::Event(Event::Mlat(fix)));
-        if let (Some((_, _, sigma)), true, Some(d)) = (conformance.0, conformance.1, d) {
-            // The same transmission's ADS-B position against its fix.
+        if let Some((d, sigma)) = pair {
             let v = sigma * sigma;
             let s = [
                 [v + c[0][0] * inflation, c[0][1] * inflation],
