@@ -44,9 +44,8 @@ pub struct Updated {
     pub post: Gaussian,
     /// Normalised innovation squared (chi-square with M dof when consistent).
     pub nis: f64,
-    /// Measurement likelihood N(innovation; 0, S), and its logarithm (which
-    /// does not underflow for a far-off measurement).
-    pub likelihood: f64,
+    /// Logarithm of the measurement likelihood N(innovation; 0, S) (the
+    /// likelihood itself underflows for a far-off measurement).
     pub log_likelihood: f64,
 }
 
@@ -89,7 +88,6 @@ impl Gaussian {
         Some(Updated {
             post: Gaussian { x: self.x + k * nu, p: (p + p.transpose()) * 0.5 },
             nis,
-            likelihood: log_likelihood.exp(),
             log_likelihood,
         })
     }
@@ -120,7 +118,9 @@ mod tests {
         assert!((u.post.x[0] - 5.0).abs() < 1e-12);
         assert!((u.post.p[(0, 0)] - 50.0).abs() < 1e-9);
         assert!((u.nis - 0.5).abs() < 1e-12);
-        assert!((u.likelihood - (-0.25f64).exp() / (2.0 * std::f64::consts::PI * 200.0)).abs() < 1e-12);
+        assert!(
+            (u.log_likelihood.exp() - (-0.25f64).exp() / (2.0 * std::f64::consts::PI * 200.0)).abs() < 1e-12
+        );
         assert!(u.post.healthy());
         let bad = PosMeasurement { z: Vector2::zeros(), r: -Matrix2::identity() * 1e3 };
         assert!(g.update(&bad).is_none());
