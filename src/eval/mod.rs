@@ -113,9 +113,8 @@ struct Acc {
     times: Vec<f64>,
     h_err: Vec<f64>,
     v_err: Vec<f64>,
-    nees: Vec<f64>,
-    /// Time of each NEES value.
-    nees_t: Vec<f64>,
+    /// (time, NEES) of each estimate with a covariance.
+    nees: Vec<(f64, f64)>,
     /// Horizontal Cramér-Rao variances (trace, m^2) of MLAT fixes.
     crb: Vec<f64>,
 }
@@ -285,8 +284,7 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
             if let (Some(a), Some(b), Some(cc), Some(d)) = (g(0, 0), g(0, 1), g(1, 0), g(1, 1)) {
                 let det = a * d - b * cc;
                 if det > 0.0 {
-                    acc.nees.push((d * e[0] * e[0] - (b + cc) * e[0] * e[1] + a * e[1] * e[1]) / det);
-                    acc.nees_t.push(t);
+                    acc.nees.push((t, (d * e[0] * e[0] - (b + cc) * e[0] * e[1] + a * e[1] * e[1]) / det));
                 }
             }
         }
@@ -301,7 +299,6 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
         e.0.h_err.extend(acc.h_err);
         e.0.v_err.extend(acc.v_err);
         e.0.nees.extend(acc.nees);
-        e.0.nees_t.extend(acc.nees_t);
         e.0.crb.extend(acc.crb);
     }
     let make_row =
@@ -313,9 +310,10 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
             h_rmse_m: rms(&acc.h_err),
             h_p95_m: p95(&acc.h_err),
             v_rmse_m: (!acc.v_err.is_empty()).then(|| rms(&acc.v_err)),
-            nees: (!acc.nees.is_empty()).then(|| acc.nees.iter().sum::<f64>() / acc.nees.len() as f64),
+            nees: (!acc.nees.is_empty())
+                .then(|| acc.nees.iter().map(|(_, x)| x).sum::<f64>() / acc.nees.len() as f64),
             nees_band: (!acc.nees.is_empty()).then(|| nees_band(acc.nees.len(), 2.0)),
-            nees_samples: acc.nees_t.iter().copied().zip(acc.nees.iter().copied()).collect(),
+            nees_samples: acc.nees.clone(),
             continuity: cont,
             breaks,
             false_tracks,
@@ -333,7 +331,6 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
         o.0.h_err.extend(&acc.h_err);
         o.0.v_err.extend(&acc.v_err);
         o.0.nees.extend(&acc.nees);
-        o.0.nees_t.extend(&acc.nees_t);
         o.0.crb.extend(&acc.crb);
         o.1 += 1;
         o.2 += cont;
