@@ -136,16 +136,11 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
     let mut cmds = Vec::new();
     for batch in rx {
         for rec in batch {
-            match rec {
-                CaptureRecord::Receiver(d) => {
-                    front.add_receiver(d, &mut cmds);
-                }
-                CaptureRecord::Frame(f) => {
-                    first = first.min(f.arrival);
-                    last = last.max(f.arrival);
-                    front.on_frame(f.rx, f.arrival, &f.frame, &mut cmds);
-                }
+            if let CaptureRecord::Frame(f) = &rec {
+                first = first.min(f.arrival);
+                last = last.max(f.arrival);
             }
+            front.on_record(rec, &mut cmds);
         }
         // A writer that stopped (an output error) says why when joined.
         // The next batch's buffer at this one's size: growing a vector of

@@ -13,7 +13,7 @@ use std::collections::HashMap;
 
 use super::back::Cmd;
 use super::{CoreConfig, CoreStats, Event, PositionReport};
-use crate::feed::capture::{ClockKind, ReceiverDecl};
+use crate::feed::capture::{CaptureRecord, ClockKind, ReceiverDecl};
 use crate::feed::RawFrame;
 use crate::fuse::conformance::{ConformanceConfig, Monitor};
 use crate::geo::geodetic_to_ecef;
@@ -164,6 +164,16 @@ impl Front {
             ctx.on_group(&g, now, cmds)
         });
         cmds.push(Cmd::Finish);
+    }
+
+    /// One record of a capture: a receiver declared, or a frame.
+    pub fn on_record(&mut self, rec: CaptureRecord, cmds: &mut Vec<Cmd>) {
+        match rec {
+            CaptureRecord::Receiver(d) => {
+                self.add_receiver(d, cmds);
+            }
+            CaptureRecord::Frame(f) => self.on_frame(f.rx, f.arrival, &f.frame, cmds),
+        }
     }
 
     /// One frame from receiver `rx`, arrived at `arrival` (Unix s).

@@ -172,12 +172,8 @@ impl Core {
 
     /// One record of a capture: a receiver declared, or a frame.
     pub fn on_record(&mut self, rec: CaptureRecord, out: &mut Vec<Event>) {
-        match rec {
-            CaptureRecord::Receiver(d) => {
-                self.add_receiver(d);
-            }
-            CaptureRecord::Frame(f) => self.on_frame(f.rx, f.arrival, &f.frame, out),
-        }
+        self.front.on_record(rec, &mut self.cmds);
+        self.run(out);
     }
 
     /// One frame from receiver `rx`, arrived at `arrival` (Unix s).
