@@ -355,7 +355,8 @@ impl Fuser {
         }
         let hold = self.cfg.mlat_hold_s;
         let mlat_fed = m.t - a.last_source_t[Source::Mlat as usize] < self.cfg.sources_window_s;
-        if hold > 0.0 && (mlat_fed || !a.waiting.is_empty()) {
+        let waiting = !a.waiting.is_empty();
+        if hold > 0.0 && mlat_fed {
             if a.waiting.len() >= MAX_WAITING {
                 // A flood of one aircraft: what waits goes in now, not lost.
                 self.release(addr, f64::INFINITY, out);
@@ -365,6 +366,10 @@ impl Fuser {
             a.waiting.insert(i, (now + hold, m));
             self.held.push_back((now + hold, addr));
             return;
+        }
+        if waiting {
+            // MLAT stopped feeding it: what still waits goes in first, in order.
+            self.release(addr, f64::INFINITY, out);
         }
         self.apply(addr, m);
         self.publish(addr, out);
@@ -781,11 +786,12 @@ mod tests {
         assert!(out.iter().any(|o| matches!(o, Output::Track(r) if r.est.state.healthy())));
     }
 
-    /// An aircraft flying east at 200 m/s: ADS-B positions at 2 Hz on time,
-    /// an MLAT fix a second arriving 0.5 s after its time; the core moves
-    /// time forward before each arrival. Returns the publication times and
-    /// the stats.
-    fn mlat_fed_flight(hold_s: f64) -> (Vec<f64>, FuseStats) {
+    /// An aircraft flying east at 200 m/s for a minute: ADS-B positions at
+    /// 2 Hz on time, an MLAT fix a second (for the first `mlat_s` seconds)
+    /// arriving 0.5 s after its time; the core moves time forward before
+    /// each arrival. Returns each publication's (arrival time, track time)
+    /// and the stats.
+    fn mlat_fed_flight(hold_s: f64, mlat_s: f64) -> (Vec<(f64, f64)>, FuseStats) {
         let cfg = FuseConfig { mlat_hold_s: hold_s, ..FuseConfig::default() };
         let mut f = Fuser::new(cfg, TrackConfig::default(), false);
         let at = |t: f64| crate::geo::displace(45.0, 5.0, 3000.0, [200.0 * (t - 100.0), 0.0, 0.0]);
@@ -794,41 +800,54 @@ mod tests {
             let t = 100.0 + 0.5 * k as f64;
             let (lat, lon, _) = at(t);
             arrivals.push((t, pos(t, lat, lon)));
-            if k % 2 == 1 {
+            if k % 2 == 1 && t < 100.0 + mlat_s {
                 let tf = t + 0.25;
                 let (lat, lon, _) = at(tf);
                 arrivals.push((tf + 0.5, Measurement { source: Source::Mlat, ..pos(tf, lat, lon) }));
             }
         }
         arrivals.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let mut out = Vec::new();
+        let (mut out, mut published) = (Vec::new(), Vec::new());
+        let mut collect = |out: &mut Vec<Output>, now: f64| {
+            for o in out.drain(..) {
+                if let Output::Track(r) = o {
+                    published.push((now, r.est.t));
+                }
+            }
+        };
         for (now, m) in arrivals {
             f.advance(now, &mut out);
             f.on_measurement(1, Some(8), m, now, &mut out);
+            collect(&mut out, now);
         }
         f.finish(&mut out);
-        let times = out
-            .iter()
-            .filter_map(|o| match o {
-                Output::Track(r) => Some(r.est.t),
-                _ => None,
-            })
-            .collect();
-        (times, *f.stats())
+        collect(&mut out, f64::INFINITY);
+        (published, *f.stats())
     }
 
     #[test]
     fn an_mlat_fed_track_takes_late_fixes_in_order_and_keeps_its_period() {
-        let (held, stats) = mlat_fed_flight(0.6);
+        let (held, stats) = mlat_fed_flight(0.6, 60.0);
         // Only the very first fix (before the aircraft counts as MLAT-fed)
         // lands behind newer ADS-B; without the hold every fix does.
         assert!(stats.reruns <= 1, "{stats:?}");
-        assert!(mlat_fed_flight(0.0).1.reruns >= 50);
+        assert!(mlat_fed_flight(0.0, 60.0).1.reruns >= 50);
         // NACp 8: one publication per 0.6 s over the ~57 s after confirmation,
-        // each at a newer time than the last.
+        // each at a newer time than the last, about the hold after its time.
         assert!((90..=100).contains(&held.len()), "{}", held.len());
-        assert!(held.windows(2).all(|w| w[1] > w[0]));
-        let gaps = held.windows(2).map(|w| w[1] - w[0]).sum::<f64>() / (held.len() - 1) as f64;
+        assert!(held.windows(2).all(|w| w[1].1 > w[0].1));
+        let gaps = held.windows(2).map(|w| w[1].1 - w[0].1).sum::<f64>() / (held.len() - 1) as f64;
         assert!((gaps - 0.6).abs() < 0.05, "mean gap {gaps}");
+        assert!(held[5..held.len() - 1].iter().all(|(now, t)| (0.5..=1.0).contains(&(now - t))), "{held:?}");
+    }
+
+    #[test]
+    fn a_track_mlat_stops_feeding_goes_out_at_once_again() {
+        // MLAT for the first 20 s; 10 s later (the sources window) the
+        // track is ADS-B only and each publication leaves on arrival.
+        let (published, _) = mlat_fed_flight(0.6, 20.0);
+        let late: Vec<&(f64, f64)> = published.iter().filter(|(_, t)| *t > 132.0).collect();
+        assert!(late.len() > 40);
+        assert!(late.iter().all(|(now, t)| now == t), "{late:?}");
     }
 }
