@@ -4,11 +4,14 @@
 //!
 //! Why a history: MLAT fixes arrive after the copies of their transmission
 //! have been collected (half a second), ADS-B positions straight away, so a
-//! track sees measurements out of time order all the time. Each stored
-//! measurement keeps the state from before it; a late one restores the state
-//! before its time and the newer ones are re-applied after it. The cost is a
-//! few re-runs of a 1-2 microsecond step, and the result is the same as if
-//! everything had arrived in order.
+//! track can see measurements out of time order (the fusion stage's MLAT
+//! hold makes that rare, but not impossible). The recent measurements are
+//! kept, every fourth with a copy of the state from before it; a late one
+//! restores the nearest copy before its time and the measurements from
+//! there are re-applied around it. The result is the same as if everything
+//! had arrived in order; the copies (1.7 kB each) are a quarter of what one
+//! per measurement would cost, paid on every step, for a step or two more
+//! in the rare re-run.
 //!
 //! Why VB: a transponder's NACp is a claim. The noise actually seen is
 //! estimated Särkkä-Nummenmaa style, as an inverse-gamma scale on the
@@ -241,8 +244,11 @@ const RECENTRE_M: f64 = 20_000.0;
 /// aircraft sends about seven a second (positions, velocities, fixes,
 /// altitudes), so 24 cover the default 2 s window with room; a flood of
 /// one aircraft's data (a replay run fast, a looping feed) cannot grow a
-/// track's memory beyond this (each entry holds a copy of the filter, 1.7 kB).
+/// track's memory beyond this (every `SNAPSHOT_EVERY`th entry holds a copy
+/// of the filter, 1.7 kB).
 const MAX_HISTORY: usize = 24;
+/// One measurement in this many keeps the state from before it.
+const SNAPSHOT_EVERY: usize = 4;
 
 /// Initial velocity uncertainty without a velocity report (m/s, 1 sigma).
 const INIT_SPEED_SIGMA: f64 = 150.0;
@@ -254,8 +260,9 @@ pub struct Track {
     cfg: Arc<TrackConfig>,
     gate: f64,
     state: State,
-    /// Measurements within the reorder window, in time order, each with the state before it.
-    history: VecDeque<(Measurement, State)>,
+    /// Measurements within the reorder window, in time order, every
+    /// `SNAPSHOT_EVERY`th (and always the oldest) with the state before it.
+    history: VecDeque<(Measurement, Option<Box<State>>)>,
     /// Recent position outcomes, newest in bit 0 (1 = accepted).
     hits: u32,
     seen: u32,
@@ -328,34 +335,71 @@ impl Track {
         } else if m.t < oldest || m.t < self.state.t - self.cfg.reorder_window_s {
             return Outcome::TooLate;
         } else {
-            // Back to the state before the first newer measurement, then
-            // this one and the newer ones again, in order.
+            // Back to the nearest copy before the first newer measurement,
+            // then the older ones from there, this one and the newer ones
+            // again, in order.
             let i = self.history.partition_point(|(h, _)| h.t <= m.t);
-            let mut tail = self.history.drain(i..);
+            let j = (0..=i).rev().find(|&k| self.history[k].1.is_some()).expect("the oldest has a copy");
+            let mut tail = self.history.drain(j..);
             let (first, before) = tail.next().expect("a newer measurement exists");
             let rest: Vec<Measurement> = std::iter::once(first).chain(tail.map(|(h, _)| h)).collect();
-            self.state = before;
+            self.state = *before.expect("found with a copy");
+            let (older, newer) = rest.split_at(i - j);
+            for h in older {
+                self.apply_and_store(*h);
+            }
             let o = self.apply_and_store(m);
-            for h in rest {
-                self.apply_and_store(h);
+            for h in newer {
+                self.apply_and_store(*h);
             }
             o
         };
         if let Observation::Position { .. } = m.obs {
             self.record_hit(matches!(outcome, Outcome::Applied { .. } | Outcome::Restarted), m.t);
         }
+        // Older entries go, up to the next copy, once that copy is older
+        // than the window (or there are too many): the oldest kept always
+        // has one to go back to.
         let horizon = self.state.t - self.cfg.reorder_window_s;
-        while self.history.len() > 1 && self.history[1].0.t < horizon || self.history.len() > MAX_HISTORY {
-            self.history.pop_front();
+        while let Some(next) = (1..self.history.len()).find(|&k| self.history[k].1.is_some()) {
+            if self.history[next].0.t >= horizon && self.history.len() <= MAX_HISTORY {
+                break;
+            }
+            self.history.drain(..next);
         }
         outcome
     }
 
     fn apply_and_store(&mut self, m: Measurement) -> Outcome {
-        let before = self.state.clone();
+        let copy = self.history.iter().rev().take(SNAPSHOT_EVERY - 1).all(|(_, s)| s.is_none());
+        let before = copy.then(|| Box::new(self.state.clone()));
         let o = self.apply_one(&m);
         self.history.push_back((m, before));
         o
+    }
+
+    /// The state after the history's measurements before index `i`, from
+    /// the nearest copy (the estimate of a time between copies).
+    fn replayed(&self, i: usize) -> State {
+        let j = (0..=i).rev().find(|&k| self.history[k].1.is_some()).expect("the oldest has a copy");
+        let mut scratch = Track {
+            spec: self.spec.clone(),
+            cfg: self.cfg.clone(),
+            gate: self.gate,
+            state: self.history[j].1.as_deref().expect("found with a copy").clone(),
+            history: VecDeque::new(),
+            hits: 0,
+            seen: 0,
+            stage: self.stage,
+            last_position_t: self.last_position_t,
+            restarts: 0,
+            keep_gain: false,
+            gain: None,
+        };
+        for (h, _) in self.history.range(j..i) {
+            scratch.apply_one(h);
+        }
+        scratch.state
     }
 
     fn record_hit(&mut self, hit: bool, t: f64) {
@@ -636,6 +680,7 @@ impl Track {
     /// predicted to `t`. `None` before the first position, for a time older
     /// than the history, or when the state is not healthy (never published).
     pub fn estimate_at(&self, t: f64) -> Option<Estimate> {
+        let replayed;
         let state = if t >= self.state.t {
             &self.state
         } else {
@@ -644,7 +689,11 @@ impl Track {
                 return None;
             }
             match self.history.get(i) {
-                Some((_, before)) => before,
+                Some((_, Some(before))) => before,
+                Some((_, None)) => {
+                    replayed = self.replayed(i);
+                    &replayed
+                }
                 None => &self.state,
             }
         };
