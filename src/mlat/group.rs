@@ -7,6 +7,8 @@
 
 use std::collections::{HashMap, VecDeque};
 
+use smallvec::{smallvec, SmallVec};
+
 use crate::feed::RawFrame;
 
 /// One receiver's copy.
@@ -44,7 +46,9 @@ pub struct GroupInfo {
 pub struct Group {
     pub frame: RawFrame,
     pub first_arrival: f64,
-    pub copies: Vec<Copy>,
+    /// Inline for the usual handful of receivers: a transmission costs no
+    /// allocation, and joining it touches one place in memory.
+    pub copies: SmallVec<[Copy; 8]>,
     pub info: GroupInfo,
 }
 
@@ -133,7 +137,7 @@ impl Grouper {
         self.queue.push_back(Group {
             frame: *frame,
             first_arrival: arrival,
-            copies: vec![copy],
+            copies: smallvec![copy],
             info: GroupInfo::default(),
         });
         Added::New
