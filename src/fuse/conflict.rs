@@ -102,6 +102,13 @@ pub fn assess(cfg: &ConflictConfig, a: &Kinematics, b: &Kinematics) -> Option<Co
     let lvl = level(a.alt_ft.min(b.alt_ft));
     let (dx, dy, dz) = (b.pos[0] - a.pos[0], b.pos[1] - a.pos[1], b.pos[2] - a.pos[2]);
     let (vx, vy, vz) = (b.vel[0] - a.vel[0], b.vel[1] - a.vel[1], b.vel[2] - a.vel[2]);
+    // The vertical test first: it is cheap and most pairs in a cell are at
+    // other levels.
+    let zthr = lvl.zthr_ft * FT_TO_M;
+    let vertical = dz.abs() < zthr || (dz * vz < 0.0 && (dz.abs() - zthr) / vz.abs() < lvl.tau_s);
+    if !vertical {
+        return None;
+    }
     let r = dx.hypot(dy);
     let rdot = if r > 0.0 { (dx * vx + dy * vy) / r } else { 0.0 };
     let dmod = lvl.dmod_nm * NM;
@@ -118,9 +125,7 @@ pub fn assess(cfg: &ConflictConfig, a: &Kinematics, b: &Kinematics) -> Option<Co
     // Modified tau runs ahead of the time to closest approach by DMOD^2 /
     // (v^2 t); the look-ahead holds for both.
     let horizontal = tau < lvl.tau_s && (r < dmod || t_cpa <= lvl.tau_s) && miss < cfg.max_miss_nm * NM;
-    let zthr = lvl.zthr_ft * FT_TO_M;
-    let vertical = dz.abs() < zthr || (dz * vz < 0.0 && (dz.abs() - zthr) / vz.abs() < lvl.tau_s);
-    (horizontal && vertical).then_some(Conflict {
+    horizontal.then_some(Conflict {
         a: a.addr,
         b: b.addr,
         tau_s: tau,

@@ -545,38 +545,54 @@ impl Fuser {
 
     /// Pairs of confirmed tracks in predicted conflict; alerts on changes.
     fn conflicts(&mut self, now: f64, out: &mut Vec<Output>) {
-        // In address order: the frame's origin (and so every figure) must
-        // not depend on the hash map's order, or runs would differ.
-        let mut addrs: Vec<u32> = self.aircraft.keys().copied().collect();
-        addrs.sort_unstable();
-        let mut origin: Option<Plane> = None;
-        let mut kin = Vec::new();
-        for addr in addrs {
-            let a = &self.aircraft[&addr];
+        // Each track's latest mean (no covariance: this scans thousands of
+        // tracks each time), moved to now along its velocity, then in
+        // address order: the frame's origin (and so every figure) must not
+        // depend on the hash map's order, or runs would differ.
+        struct Seen {
+            addr: u32,
+            lat: f64,
+            lon: f64,
+            alt: f64,
+            vel: [f64; 3],
+            alt_ft: f64,
+            dt: f64,
+        }
+        let mut seen: Vec<Seen> = Vec::with_capacity(self.aircraft.len());
+        for (&addr, a) in &self.aircraft {
             // Airborne traffic only: surface movements are not TCAS encounters.
             if a.fused.stage != Stage::Confirmed
                 || now - a.fused.last_position_t > self.tcfg.coast_after_s
                 || a.surface
-                || a.fused.speed().is_none_or(|v| v < MIN_CONFLICT_SPEED_MPS)
             {
                 continue;
             }
-            // The track's own latest estimate, moved to now along its velocity:
-            // a full prediction for thousands of tracks would stall the core.
-            let Some(e) = a.fused.estimate_at(a.fused.t()) else {
+            let Some(crate::track::track::Kinematics { t, lat, lon, alt_m: Some(alt), vel_enu: vel }) =
+                a.fused.kinematics()
+            else {
                 continue;
             };
-            let Some(alt) = e.alt_m else {
+            if vel[0].hypot(vel[1]) < MIN_CONFLICT_SPEED_MPS {
                 continue;
-            };
-            let plane = *origin.get_or_insert_with(|| Plane::new(e.lat, e.lon, 0.0));
-            let en = plane.to_en(e.lat, e.lon);
+            }
             let alt_ft = a.alt_baro_ft.map_or(alt / crate::geo::FT_TO_M, f64::from);
-            let dt = (now - e.t).max(0.0);
-            let v = e.vel_enu;
-            let pos = [en[0] + v[0] * dt, en[1] + v[1] * dt, alt + v[2] * dt];
-            kin.push(conflict::Kinematics { addr, pos, vel: v, alt_ft });
+            seen.push(Seen { addr, lat, lon, alt, vel, alt_ft, dt: (now - t).max(0.0) });
         }
+        seen.sort_unstable_by_key(|s| s.addr);
+        let kin: Vec<conflict::Kinematics> = match seen.first() {
+            None => Vec::new(),
+            Some(first) => {
+                let origin = Plane::new(first.lat, first.lon, 0.0);
+                seen.iter()
+                    .map(|s| {
+                        let en = origin.to_en(s.lat, s.lon);
+                        let v = s.vel;
+                        let pos = [en[0] + v[0] * s.dt, en[1] + v[1] * s.dt, s.alt + v[2] * s.dt];
+                        conflict::Kinematics { addr: s.addr, pos, vel: v, alt_ft: s.alt_ft }
+                    })
+                    .collect()
+            }
+        };
         let found: HashMap<(u32, u32), conflict::Conflict> = conflict::find(&self.cfg.conflict, &kin)
             .into_iter()
             .map(|c| ((c.a.min(c.b), c.a.max(c.b)), c))

@@ -69,6 +69,11 @@ impl Imm {
         combine(&self.filters, &self.mu)
     }
 
+    /// The combined state's mean alone (what needs no covariance).
+    pub fn mean(&self) -> Vector6<f64> {
+        self.filters.iter().zip(&self.mu).fold(Vector6::zeros(), |x, (g, &w)| x + g.x * w)
+    }
+
     /// Mixing and model-matched prediction over `dt`: everything of a step
     /// that does not depend on the measurement, so a caller can gate on the
     /// combined prediction and try several noise levels (VB) without
