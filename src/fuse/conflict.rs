@@ -224,6 +224,21 @@ mod tests {
                 30_000.0,
             ));
         }
+        // Other levels, climbing and descending: pairs the vertical test
+        // decides, in every altitude band.
+        for i in 0..400u32 {
+            let f = i as f64;
+            let mut t = k(
+                2000 + i,
+                (f * 6133.0) % 300_000.0,
+                (f * 7_727.0) % 300_000.0,
+                220.0 * (f * 0.7).cos(),
+                220.0 * (f * 0.7).sin(),
+                2_000.0 + (f * 977.0) % 38_000.0,
+            );
+            t.vel[2] = 20.0 * (f * 1.3).sin();
+            tracks.push(t);
+        }
         // And some certain ones, across cell borders.
         for i in 0..10u32 {
             let x = 59_000.0 + 60_000.0 * i as f64;
