@@ -858,6 +858,29 @@ mod tests {
     }
 
     #[test]
+    fn a_flood_of_one_mlat_fed_aircraft_is_applied_early_not_queued_without_bound() {
+        let mut f = Fuser::new(FuseConfig::default(), TrackConfig::default(), false);
+        let mut out = Vec::new();
+        let at = |t: f64| crate::geo::displace(45.0, 5.0, 3000.0, [200.0 * (t - 100.0), 0.0, 0.0]);
+        let fix = |t: f64| {
+            let (lat, lon, _) = at(t);
+            Measurement { source: Source::Mlat, ..pos(t, lat, lon) }
+        };
+        f.on_measurement(1, None, fix(100.0), 100.0, &mut out);
+        // 1,000 positions within a millisecond of arrival time (a replay
+        // looping fast): none is lost, none waits beyond the bound.
+        for k in 0..1000 {
+            let t = 100.0 + 0.001 * k as f64;
+            f.on_measurement(1, None, fix(t), 100.5, &mut out);
+            assert!(f.aircraft[&1].waiting.len() <= MAX_WAITING);
+        }
+        assert_eq!(f.stats().measurements, 1001);
+        f.finish(&mut out);
+        assert!(f.aircraft[&1].waiting.is_empty());
+        assert_eq!(f.aircraft[&1].fused.t(), 100.999);
+    }
+
+    #[test]
     fn a_track_mlat_stops_feeding_goes_out_at_once_again() {
         // MLAT for the first 20 s; 10 s later (the sources window) the
         // track is ADS-B only and each publication leaves on arrival.
