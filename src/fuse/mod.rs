@@ -549,16 +549,8 @@ impl Fuser {
         // tracks each time), moved to now along its velocity, then in
         // address order: the frame's origin (and so every figure) must not
         // depend on the hash map's order, or runs would differ.
-        struct Seen {
-            addr: u32,
-            lat: f64,
-            lon: f64,
-            alt: f64,
-            vel: [f64; 3],
-            alt_ft: f64,
-            dt: f64,
-        }
-        let mut seen: Vec<Seen> = Vec::with_capacity(self.aircraft.len());
+        let mut seen: Vec<(u32, f64, f64, crate::track::track::Kinematics)> =
+            Vec::with_capacity(self.aircraft.len());
         for (&addr, a) in &self.aircraft {
             // Airborne traffic only: surface movements are not TCAS encounters.
             if a.fused.stage != Stage::Confirmed
@@ -567,28 +559,29 @@ impl Fuser {
             {
                 continue;
             }
-            let Some(crate::track::track::Kinematics { t, lat, lon, alt_m: Some(alt), vel_enu: vel }) =
-                a.fused.kinematics()
-            else {
+            let Some(k) = a.fused.kinematics() else {
                 continue;
             };
-            if vel[0].hypot(vel[1]) < MIN_CONFLICT_SPEED_MPS {
+            let Some(alt) = k.alt_m else {
+                continue;
+            };
+            if k.vel_enu[0].hypot(k.vel_enu[1]) < MIN_CONFLICT_SPEED_MPS {
                 continue;
             }
             let alt_ft = a.alt_baro_ft.map_or(alt / crate::geo::FT_TO_M, f64::from);
-            seen.push(Seen { addr, lat, lon, alt, vel, alt_ft, dt: (now - t).max(0.0) });
+            seen.push((addr, alt, alt_ft, k));
         }
-        seen.sort_unstable_by_key(|s| s.addr);
+        seen.sort_unstable_by_key(|s| s.0);
         let kin: Vec<conflict::Kinematics> = match seen.first() {
             None => Vec::new(),
             Some(first) => {
-                let origin = Plane::new(first.lat, first.lon, 0.0);
+                let origin = Plane::new(first.3.lat, first.3.lon, 0.0);
                 seen.iter()
-                    .map(|s| {
-                        let en = origin.to_en(s.lat, s.lon);
-                        let v = s.vel;
-                        let pos = [en[0] + v[0] * s.dt, en[1] + v[1] * s.dt, s.alt + v[2] * s.dt];
-                        conflict::Kinematics { addr: s.addr, pos, vel: v, alt_ft: s.alt_ft }
+                    .map(|&(addr, alt, alt_ft, k)| {
+                        let en = origin.to_en(k.lat, k.lon);
+                        let (v, dt) = (k.vel_enu, (now - k.t).max(0.0));
+                        let pos = [en[0] + v[0] * dt, en[1] + v[1] * dt, alt + v[2] * dt];
+                        conflict::Kinematics { addr, pos, vel: v, alt_ft }
                     })
                     .collect()
             }

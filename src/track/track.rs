@@ -177,9 +177,7 @@ impl Estimate {
     /// and climb rate: position, velocity and covariance published in the
     /// aircraft's own east/north, not the plane's.
     pub fn new(t: f64, plane: Plane, g: Gaussian, alt_m: Option<f64>, climb: f64) -> Estimate {
-        let (lat, lon) = plane.to_geodetic(g.x[0], g.x[1]);
-        let r = plane.from_local(lat, lon).transpose();
-        let v = r * Vector2::new(g.x[2], g.x[3]);
+        let (lat, lon, r, v) = at_aircraft(&plane, &g.x);
         let c = r * g.p.fixed_view::<2, 2>(0, 0) * r.transpose();
         Estimate {
             t,
@@ -202,6 +200,14 @@ impl Estimate {
     pub fn in_plane(&self, other: &Plane) -> Gaussian {
         transfer(&self.state, &self.plane, other)
     }
+}
+
+/// A plane state's position (lat, lon), the rotation from the plane's axes
+/// to the aircraft's own east/north there, and its velocity in the latter.
+fn at_aircraft(plane: &Plane, x: &Vector6<f64>) -> (f64, f64, Matrix2<f64>, Vector2<f64>) {
+    let (lat, lon) = plane.to_geodetic(x[0], x[1]);
+    let r = plane.from_local(lat, lon).transpose();
+    (lat, lon, r, r * Vector2::new(x[2], x[3]))
 }
 
 /// A track's mean position and velocity at a time (no covariance).
@@ -350,7 +356,7 @@ impl Track {
             // then the older ones from there, this one and the newer ones
             // again, in order.
             let i = self.history.partition_point(|(h, _)| h.t <= m.t);
-            let j = (0..=i).rev().find(|&k| self.history[k].1.is_some()).expect("the oldest has a copy");
+            let j = self.nearest_copy(i);
             let mut tail = self.history.drain(j..);
             let (first, before) = tail.next().expect("a newer measurement exists");
             let rest: Vec<Measurement> = std::iter::once(first).chain(tail.map(|(h, _)| h)).collect();
@@ -389,10 +395,16 @@ impl Track {
         o
     }
 
+    /// Index of the nearest history entry at or before `i` that keeps a copy
+    /// of the state (the oldest always does).
+    fn nearest_copy(&self, i: usize) -> usize {
+        (0..=i).rev().find(|&k| self.history[k].1.is_some()).expect("the oldest has a copy")
+    }
+
     /// The state after the history's measurements before index `i`, from
     /// the nearest copy (the estimate of a time between copies).
     fn replayed(&self, i: usize) -> State {
-        let j = (0..=i).rev().find(|&k| self.history[k].1.is_some()).expect("the oldest has a copy");
+        let j = self.nearest_copy(i);
         let mut scratch = Track {
             spec: self.spec.clone(),
             cfg: self.cfg.clone(),
@@ -697,8 +709,7 @@ impl Track {
             return None;
         }
         let t = self.state.t_h;
-        let (lat, lon) = plane.to_geodetic(x[0], x[1]);
-        let v = plane.from_local(lat, lon).transpose() * Vector2::new(x[2], x[3]);
+        let (lat, lon, _, v) = at_aircraft(&plane, &x);
         let vertical = self.state.vertical.map(|v| (v.x[0] + v.x[1] * (t - self.state.t_v), v.x[1]));
         Some(Kinematics {
             t,
