@@ -29,7 +29,7 @@ fn locards_fixes_are_accurate_and_their_covariance_honest() {
     let mut fixes: HashMap<String, Vec<(&fuse1090::mlat::MlatFix, bool)>> = HashMap::new();
     for e in &events {
         if let Event::Mlat(f) = e {
-            fixes.entry(format!("{:06X}", f.addr)).or_default().push((f, false));
+            fixes.entry(format!("{:06X}", f.addr)).or_default().push((&**f, false));
         }
     }
     let mut by_hex: HashMap<&str, Vec<&Value>> = HashMap::new();

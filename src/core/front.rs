@@ -45,6 +45,9 @@ struct GroupCtx<'a> {
     sync_inflation: f64,
 }
 
+/// Finest step of time the tracker is told of (s).
+const ADVANCE_STEP_S: f64 = 0.001;
+
 pub struct Front {
     receivers: Vec<RxState>,
     decoder: Decoder,
@@ -81,7 +84,7 @@ impl Front {
             conformance: cfg.fuse.conformance.clone(),
             drop_after_s: cfg.track.drop_after_s,
             next_sweep: f64::NEG_INFINITY,
-            advanced_to: f64::NAN,
+            advanced_to: f64::NEG_INFINITY,
             stats: CoreStats::default(),
             min_sync_nacp: cfg.mlat.min_sync_nacp,
             baro_sigma_m: cfg.mlat.baro_sigma_m,
@@ -149,8 +152,11 @@ impl Front {
             let drop = self.drop_after_s;
             self.watched.retain(|_, w| now - w.last_heard <= drop);
         }
-        // Advancing the tracker again to the same time changes nothing.
-        if now != self.advanced_to {
+        // The tracker is told the time at most once a millisecond (and with
+        // every measurement, which carries its own): frames arrive a hundred
+        // a millisecond at scale, and a command per frame cost more than the
+        // tracker's work; a publication falls due at most this much late.
+        if now < self.advanced_to || now - self.advanced_to >= ADVANCE_STEP_S {
             self.advanced_to = now;
             cmds.push(Cmd::Advance(now));
         }
@@ -450,7 +456,7 @@ impl GroupCtx<'_> {
         let pair = g.info.report.filter(|_| fix.dof >= 1 && fix.chi2 <= 3.0).map(|(lat, lon, sigma)| {
             (crate::track::plane::Plane::new(lat, lon, 0.0).to_en(fix.lat, fix.lon), sigma)
         });
-        cmds.push(Cmd::Event(Event::Mlat(fix)));
+        cmds.push(Cmd::Event(Event::Mlat(Box::new(fix))));
         if let Some((d, sigma)) = pair {
             let v = sigma * sigma;
             let s = [

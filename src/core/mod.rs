@@ -113,7 +113,7 @@ pub struct PositionReport {
 #[derive(Clone, Debug, PartialEq)]
 pub enum Event {
     Position(PositionReport),
-    Mlat(MlatFix),
+    Mlat(Box<MlatFix>),
     Track(Box<TrackReport>),
     Alert(Alert),
 }
