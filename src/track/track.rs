@@ -336,7 +336,7 @@ impl Track {
 
     /// Ground speed of the current estimate (m/s).
     pub fn speed(&self) -> Option<f64> {
-        let x = self.state.imm.as_ref()?.estimate().x;
+        let x = self.state.imm.as_ref()?.mean();
         Some(x[2].hypot(x[3]))
     }
 
@@ -457,7 +457,7 @@ impl Track {
                 // a third of a degree 20 km east or west at mid latitudes).
                 let r = match (self.state.plane, &self.state.imm) {
                     (Some(plane), Some(imm)) => {
-                        let x = imm.estimate().x;
+                        let x = imm.mean();
                         let (lat, lon) = plane.to_geodetic(x[0], x[1]);
                         plane.from_local(lat, lon)
                     }
