@@ -6,7 +6,9 @@
 //! the meridians' convergence, well under a degree per step, and the state
 //! and covariance are rotated with it). Points are projected along the
 //! ellipsoid normal onto the surface at the origin's height, so an aircraft
-//! climbing far from the origin does not appear to move sideways.
+//! climbing far from the origin does not appear to move sideways; lengths
+//! are those on that surface, so the plane also follows the aircraft's
+//! height (a velocity report is in metres at the aircraft).
 
 use nalgebra::{Matrix2, Vector3};
 
@@ -72,6 +74,12 @@ impl Plane {
     }
 
     /// Rotation taking horizontal vectors of `self` into `other`'s axes.
+    /// How much longer a length on this plane's surface is on `other`'s
+    /// (the ratio of their distances from the Earth's centre).
+    pub fn scale_to(&self, other: &Plane) -> f64 {
+        (EARTH_MEAN_RADIUS_M + other.h) / (EARTH_MEAN_RADIUS_M + self.h)
+    }
+
     pub fn rotation_to(&self, other: &Plane) -> Matrix2<f64> {
         Matrix2::new(
             other.east.dot(&self.east),
