@@ -196,7 +196,8 @@ pub fn monte_carlo(
 /// 95% band of the pooled mean NEES (`sum of sums / sum of counts`) of a
 /// consistent filter with `dof` degrees of freedom, given each run's NEES
 /// sum and count: `dof` plus or minus Student's t times the ratio
-/// estimator's standard error over the runs. `None` with fewer than two runs.
+/// estimator's standard error over the runs (from 0 at the least). `None`
+/// with fewer than two runs.
 pub fn runs_band(per_run: &[(f64, usize)], dof: f64) -> Option<[f64; 2]> {
     let runs = per_run.len();
     let total: usize = per_run.iter().map(|r| r.1).sum();
@@ -207,7 +208,8 @@ pub fn runs_band(per_run: &[(f64, usize)], dof: f64) -> Option<[f64; 2]> {
     let ss: f64 = per_run.iter().map(|&(sum, n)| (sum - mean * n as f64).powi(2)).sum();
     let se = (ss * runs as f64 / (runs - 1) as f64).sqrt() / total as f64;
     let t = StudentsT::new(0.0, 1.0, (runs - 1) as f64).ok()?.inverse_cdf(0.975);
-    Some([dof - t * se, dof + t * se])
+    // A NEES is never negative: a band reaching below zero has no lower limit.
+    Some([(dof - t * se).max(0.0), dof + t * se])
 }
 
 /// The textbook N-run test over the epochs most runs saw.
