@@ -531,10 +531,15 @@ impl Track {
         let mut v = v;
         v.predict(t - self.state.t_v, self.cfg.vertical_q);
         let c = crate::mlat::solver::C_AIR;
+        if !(2..=3).contains(&sites.len()) {
+            return Outcome::Gated;
+        }
+        let site = |i: usize| sites[i.min(sites.len() - 1)];
         let m = super::ukf::Tdoa {
-            receivers: sites.iter().map(|s| plane.ecef_to_local(s.0)).collect(),
-            sigma_m: sites.iter().map(|s| s.2 * c).collect(),
-            z: sites[1..].iter().map(|s| (s.1 - sites[0].1) * c).collect(),
+            n: sites.len(),
+            receivers: std::array::from_fn(|i| plane.ecef_to_local(site(i).0)),
+            sigma_m: std::array::from_fn(|i| site(i).2 * c),
+            z: std::array::from_fn(|i| (site(i + 1).1 - sites[0].1) * c),
         };
         let (h, hv) = (v.x[0], v.p[(0, 0)]);
         let up = |e: f64, n: f64, h: f64| plane.up_at(e, n, h);
@@ -543,8 +548,8 @@ impl Track {
         // regression every model applies (see `ukf`).
         let combined = prep.combined();
         let gate = self.gate;
-        let step = match m.z.len() {
-            1 => super::ukf::linearise::<1>(&combined, h, hv, &m, up)
+        let step = match m.n {
+            2 => super::ukf::linearise::<1>(&combined, h, hv, &m, up)
                 .and_then(|lin| Self::gated_update(imm, &prep, &lin, gate)),
             _ => super::ukf::linearise::<2>(&combined, h, hv, &m, up)
                 .and_then(|lin| Self::gated_update(imm, &prep, &lin, gate)),

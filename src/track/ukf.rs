@@ -15,18 +15,20 @@
 //! every model then applies with the ordinary linear update. One transform
 //! instead of one per model (and per gate), the same first two moments.
 
-use nalgebra::{DMatrix, DVector, SMatrix, SVector, Vector3};
+use nalgebra::{SMatrix, SVector, Vector3};
 
 use super::kf::{Gaussian, Linear};
 
-/// Time differences of arrival at `receivers` (plane-local east, north, up
-/// of each antenna, m) relative to the first: `z[i] = |p - r[i+1]| - |p - r[0]|`
-/// in metres, each receiver's timing noise `sigma_m` (m, 1 sigma).
-#[derive(Clone, Debug, PartialEq)]
+/// Time differences of arrival at the first `n` (2 or 3) of `receivers`
+/// (plane-local east, north, up of each antenna, m) relative to the first:
+/// `z[i] = |p - r[i+1]| - |p - r[0]|` in metres, each receiver's timing
+/// noise `sigma_m` (m, 1 sigma). Fixed arrays: no allocation per update.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Tdoa {
-    pub receivers: Vec<Vector3<f64>>,
-    pub sigma_m: Vec<f64>,
-    pub z: Vec<f64>,
+    pub n: usize,
+    pub receivers: [Vector3<f64>; 3],
+    pub sigma_m: [f64; 3],
+    pub z: [f64; 2],
 }
 
 /// Scaled unscented transform parameters: alpha spreads the points, beta = 2
@@ -34,81 +36,90 @@ pub struct Tdoa {
 const ALPHA: f64 = 0.5;
 const BETA: f64 = 2.0;
 
+/// Most sigma points: 2 N + 1 for the largest augmented state (6 + height + 3 receivers).
+const MAX_POINTS: usize = 21;
+
 impl Tdoa {
-    fn predict(&self, x: &DVector<f64>, up: impl Fn(f64, f64, f64) -> f64) -> DVector<f64> {
+    /// The `M` time differences at augmented state `x` (`N` = 7 + `M` + 1:
+    /// horizontal state, height, one noise term per receiver).
+    fn predict<const M: usize, const N: usize>(
+        &self,
+        x: &SVector<f64, N>,
+        up: &impl Fn(f64, f64, f64) -> f64,
+    ) -> SVector<f64, M> {
         let (e, n, h) = (x[0], x[1], x[6]);
         let p = Vector3::new(e, n, up(e, n, h));
         let range = |i: usize| (p - self.receivers[i]).norm() + x[7 + i];
         let r0 = range(0);
-        DVector::from_iterator(self.z.len(), (1..self.receivers.len()).map(|i| range(i) - r0))
+        SVector::from_fn(|i, _| range(i + 1) - r0)
     }
 }
 
-/// The unscented transform of `m` at `g` (augmented with the height and the
-/// receivers' noise): the predicted measurement's mean and covariance, and
-/// its cross-covariance with the augmented state.
-struct Transform {
-    z_mean: DVector<f64>,
-    /// Innovation covariance (noise included through the sigma points).
-    s: DMatrix<f64>,
-    /// State-measurement cross-covariance (augmented state rows).
-    c: DMatrix<f64>,
-}
-
-fn transform(
+/// The statistical linear regression of `m` at `g` for `M` time differences
+/// through an augmented state of `N` = `M` + 8 dimensions (`None` when they
+/// do not match `m`, or the transform fails): the unscented transform's
+/// predicted measurement, its covariance (noise included through the sigma
+/// points) and cross-covariance with the horizontal state, turned into
+/// `z' = H x + v`.
+fn regression<const M: usize, const N: usize>(
     g: &Gaussian,
     h: f64,
     h_var: f64,
     m: &Tdoa,
     up: impl Fn(f64, f64, f64) -> f64,
-) -> Option<Transform> {
-    let k = m.receivers.len();
-    if k < 2 || m.sigma_m.len() != k || m.z.len() != k - 1 {
+) -> Option<Linear<M>> {
+    let k = M + 1;
+    if m.n != k || N != 7 + k || 2 * N + 1 > MAX_POINTS {
         return None;
     }
-    let n = 7 + k;
-    let mut mean = DVector::zeros(n);
-    mean.rows_mut(0, 6).copy_from(&g.x);
+    let mut mean = SVector::<f64, N>::zeros();
+    mean.fixed_rows_mut::<6>(0).copy_from(&g.x);
     mean[6] = h;
-    let mut cov = DMatrix::zeros(n, n);
-    cov.view_mut((0, 0), (6, 6)).copy_from(&g.p);
+    let mut cov = SMatrix::<f64, N, N>::zeros();
+    cov.fixed_view_mut::<6, 6>(0, 0).copy_from(&g.p);
     cov[(6, 6)] = h_var;
     for i in 0..k {
         cov[(7 + i, 7 + i)] = m.sigma_m[i] * m.sigma_m[i];
     }
-    let lambda = ALPHA * ALPHA * n as f64 - n as f64;
-    let l = (&cov * (n as f64 + lambda)).cholesky()?.l();
-    let mut points = Vec::with_capacity(2 * n + 1);
-    points.push(mean.clone());
-    for j in 0..n {
-        let c = l.column(j);
-        points.push(&mean + c);
-        points.push(&mean - c);
-    }
-    let w0m = lambda / (n as f64 + lambda);
+    let nf = N as f64;
+    let lambda = ALPHA * ALPHA * nf - nf;
+    let l = (cov * (nf + lambda)).cholesky()?.l();
+    let w0m = lambda / (nf + lambda);
     let w0c = w0m + 1.0 - ALPHA * ALPHA + BETA;
-    let wi = 1.0 / (2.0 * (n as f64 + lambda));
-    let zs: Vec<DVector<f64>> = points.iter().map(|p| m.predict(p, &up)).collect();
-    let dim = k - 1;
-    let mut z_mean = DVector::zeros(dim);
-    for (j, z) in zs.iter().enumerate() {
-        z_mean += z * if j == 0 { w0m } else { wi };
+    let wi = 1.0 / (2.0 * (nf + lambda));
+    // Point 0 is the mean, points 2j+1 and 2j+2 the mean plus and minus
+    // column j of the square root.
+    let mut zs = [SVector::<f64, M>::zeros(); MAX_POINTS];
+    zs[0] = m.predict(&mean, &up);
+    for j in 0..N {
+        let c = l.column(j);
+        zs[2 * j + 1] = m.predict(&(mean + c), &up);
+        zs[2 * j + 2] = m.predict(&(mean - c), &up);
     }
-    let mut s = DMatrix::zeros(dim, dim);
-    let mut c = DMatrix::zeros(n, dim);
-    for (j, (p, z)) in points.iter().zip(&zs).enumerate() {
-        let w = if j == 0 { w0c } else { wi };
-        let dz = z - &z_mean;
-        s += &dz * dz.transpose() * w;
-        c += (p - &mean) * dz.transpose() * w;
+    let z_mean = zs[1..2 * N + 1].iter().fold(zs[0] * w0m, |acc, z| acc + z * wi);
+    let d0 = zs[0] - z_mean;
+    let mut s = d0 * d0.transpose() * w0c;
+    // Cross-covariance with the horizontal state only (the mean point adds nothing).
+    let mut pxz = SMatrix::<f64, 6, M>::zeros();
+    for j in 0..N {
+        let dx = l.fixed_view::<6, 1>(0, j);
+        let (dp, dm) = (zs[2 * j + 1] - z_mean, zs[2 * j + 2] - z_mean);
+        s += (dp * dp.transpose() + dm * dm.transpose()) * wi;
+        pxz += dx * (dp - dm).transpose() * wi;
     }
-    Some(Transform { z_mean, s, c })
+    let p_inv = g.p.cholesky()?.inverse();
+    let hm = pxz.transpose() * p_inv;
+    let b = z_mean - hm * g.x;
+    let r = s - hm * g.p * hm.transpose();
+    let z = SVector::<f64, M>::from_fn(|i, _| m.z[i]) - b;
+    Some(Linear { h: hm, z, r: (r + r.transpose()) * 0.5 })
 }
 
-/// The statistical linear regression of `m` at `g`: the linear measurement
-/// `z' = H x + v`, `v ~ N(0, R)` with the transform's first two moments
-/// (`z' = z - b` with the regression's offset `b` removed), for `M` time
-/// differences (`None` when `m` has another number, or the transform fails).
+/// The statistical linear regression of `m` at `g` (augmented with the
+/// height and the receivers' noise): the linear measurement `z' = H x + v`,
+/// `v ~ N(0, R)` with the transform's first two moments (`z' = z - b` with
+/// the regression's offset `b` removed), for `M` time differences (`None`
+/// when `m` has another number, or the transform fails).
 pub fn linearise<const M: usize>(
     g: &Gaussian,
     h: f64,
@@ -116,24 +127,11 @@ pub fn linearise<const M: usize>(
     m: &Tdoa,
     up: impl Fn(f64, f64, f64) -> f64,
 ) -> Option<Linear<M>> {
-    if m.z.len() != M {
-        return None;
+    match M {
+        1 => regression::<M, 9>(g, h, h_var, m, up),
+        2 => regression::<M, 10>(g, h, h_var, m, up),
+        _ => None,
     }
-    let t = transform(g, h, h_var, m, up)?;
-    let p_inv = g.p.cholesky()?.inverse();
-    let pxz = t.c.view((0, 0), (6, t.z_mean.len())).into_owned();
-    let p_inv = DMatrix::from_iterator(6, 6, p_inv.iter().copied());
-    let hm = pxz.transpose() * &p_inv;
-    let gx = DVector::from_iterator(6, g.x.iter().copied());
-    let b = &t.z_mean - &hm * &gx;
-    let r = &t.s - &hm * DMatrix::from_iterator(6, 6, g.p.iter().copied()) * hm.transpose();
-    let r = (&r + r.transpose()) * 0.5;
-    let z = DVector::from_column_slice(&m.z) - b;
-    Some(Linear {
-        h: SMatrix::from_iterator(hm.iter().copied()),
-        z: SVector::from_iterator(z.iter().copied()),
-        r: SMatrix::from_iterator(r.iter().copied()),
-    })
 }
 
 #[cfg(test)]
@@ -147,7 +145,7 @@ mod tests {
     #[test]
     fn three_receivers_pull_a_track_to_the_truth_consistently() {
         // Receivers 30-60 km around, aircraft at 9 km: up = h (flat plane).
-        let rx = vec![
+        let rx = [
             Vector3::new(0.0, 0.0, 100.0),
             Vector3::new(40_000.0, 5_000.0, 50.0),
             Vector3::new(-10_000.0, 45_000.0, 80.0),
@@ -168,10 +166,9 @@ mod tests {
                 0.0,
             );
             let g = diagonal(x0, [prior_sd * prior_sd, prior_sd * prior_sd, 1.0, 1.0, 0.1, 0.1]);
-            let eps: Vec<f64> = (0..3).map(|_| noise.sample(&mut rng)).collect();
+            let eps: [f64; 3] = std::array::from_fn(|_| noise.sample(&mut rng));
             let r = |i: usize| (truth - rx[i]).norm() + eps[i];
-            let m =
-                Tdoa { receivers: rx.clone(), sigma_m: vec![sigma; 3], z: vec![r(1) - r(0), r(2) - r(0)] };
+            let m = Tdoa { n: 3, receivers: rx, sigma_m: [sigma; 3], z: [r(1) - r(0), r(2) - r(0)] };
             // As the tracker applies it: the regression, then a linear update.
             let lin = linearise::<2>(&g, truth.z, 25.0, &m, |_, _, h| h).unwrap();
             let u = g.update_linear(&lin).unwrap();
