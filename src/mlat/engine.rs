@@ -22,7 +22,9 @@ use crate::geo::{ecef_distance, geodetic_to_ecef, FT_TO_M};
 #[derive(Clone, Debug, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MlatConfig {
-    /// Receivers closer than this (m) count as one.
+    /// Receivers closer than this (m) count as one site, their times
+    /// averaged: only where their times cannot differ by more than their
+    /// noise (15 m is 50 ns).
     pub min_separation_m: f64,
     /// Timing jitter, 1 sigma (ns), by clock type.
     pub jitter_beast12_ns: f64,
@@ -59,7 +61,7 @@ pub struct MlatConfig {
 impl Default for MlatConfig {
     fn default() -> Self {
         MlatConfig {
-            min_separation_m: 1_000.0,
+            min_separation_m: 15.0,
             jitter_beast12_ns: 83.0,
             jitter_gps_ns: 50.0,
             baro_sigma_m: 75.0,
@@ -803,23 +805,40 @@ mod tests {
         assert!(crate::geo::distance_m(f.lat, f.lon, 48.75, 2.40) < 5.0);
     }
 
-    #[test]
-    fn receivers_at_one_site_count_once() {
+    /// The engine of `engine()` plus a sixth receiver `north_m` north of r0.
+    fn with_neighbour(north_m: f64) -> (Mlat, Vec<ReceiverDecl>) {
         let (mut m, mut rxs) = engine();
-        // A sixth receiver 10 m from r0.
         let twin = ReceiverDecl {
             id: "twin".into(),
-            lat: rxs[0].lat + 0.00009,
+            lat: rxs[0].lat + north_m / 111_200.0,
             lon: rxs[0].lon,
             alt: 100.0,
             clock: ClockKind::Gps,
         };
         m.add_receiver(&twin);
         rxs.push(twin);
+        (m, rxs)
+    }
+
+    #[test]
+    fn receivers_at_one_site_count_once() {
+        let (mut m, rxs) = with_neighbour(5.0);
         let target = geodetic_to_ecef(48.75, 2.40, 30_000.0 * FT_TO_M);
         let f = m.on_group(&group(&rxs, target, 1_700_000_000.0), 1_700_000_000.2).expect("fix");
         assert_eq!(m.stats.close_receivers, 1);
         assert_eq!(f.receivers.len(), 6, "both receivers of the site are credited");
         assert_eq!(f.dof, 2, "but they make one measurement: 5 sites + altitude - 4 unknowns");
+    }
+
+    #[test]
+    fn receivers_hundreds_of_metres_apart_are_two_sites() {
+        // 700 m apart: their times differ by up to 2.3 us, which averaging
+        // at one of them would turn into hundreds of metres of error.
+        let (mut m, rxs) = with_neighbour(700.0);
+        let target = geodetic_to_ecef(48.75, 2.40, 30_000.0 * FT_TO_M);
+        let f = m.on_group(&group(&rxs, target, 1_700_000_000.0), 1_700_000_000.2).expect("fix");
+        assert_eq!(m.stats.close_receivers, 0);
+        assert_eq!(f.dof, 3, "6 sites + altitude - 4 unknowns");
+        assert!(crate::geo::distance_m(f.lat, f.lon, 48.75, 2.40) < 5.0);
     }
 }
