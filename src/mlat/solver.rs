@@ -435,6 +435,15 @@ fn refine(
     let mut lambda = 1e-6;
     let mut last = Vector4::zeros();
     for it in 1..=max_iterations {
+        // At the optimum to within 3% of the fix's own uncertainty: the full
+        // Gauss-Newton step would lower chi-square by less than 0.001 (along
+        // a direction the geometry barely fixes, such as the height of a
+        // surface target, steps stay metres long near the optimum while
+        // changing nothing that matters). The undamped step: a damped one is
+        // short because of the damping, not because the fit is done.
+        if scaled_solve(&cur.a, &cur.g).is_some_and(|gn| cur.g.dot(&gn) < 1e-3) {
+            return Some((x, cur, it));
+        }
         let mut a = cur.a;
         for k in 0..4 {
             a[(k, k)] *= 1.0 + lambda;
@@ -453,12 +462,9 @@ fn refine(
         last = step;
         let cand = x + step;
         let next = normal(&cand, ms, t0, alt);
-        // Converged: a centimetre step, or one of 3% of the fix's own
-        // uncertainty (along a direction the geometry barely fixes, such as
-        // the height of a surface target, steps stay metres long while
-        // changing nothing that matters). Checked before acceptance, because
-        // at the optimum chi-square only wobbles in its last digits.
-        if step.fixed_rows::<3>(0).norm() < 1e-2 || step.dot(&(cur.a * step)) < 1e-3 {
+        // Converged: a centimetre step. Checked before acceptance, because at
+        // the optimum chi-square only wobbles in its last digits.
+        if step.fixed_rows::<3>(0).norm() < 1e-2 {
             return Some(if next.chi2 <= cur.chi2 { (cand, next, it) } else { (x, cur, it) });
         }
         if next.chi2 <= cur.chi2 {
