@@ -28,6 +28,18 @@ fn imm(n: usize) -> Imm {
     Imm::new(models, Imm::sticky(n, 0.9), init)
 }
 
+/// A position at 9 km, 20 m per axis, from a GPS-timed report.
+fn position(lat: f64, lon: f64) -> fuse1090::track::Observation {
+    fuse1090::track::Observation::Position {
+        lat,
+        lon,
+        cov_en: Matrix2::identity() * 400.0,
+        height: Some((9000.0, 64.0)),
+        time_sigma_s: 0.01,
+        surface: false,
+    }
+}
+
 fn bench(c: &mut Criterion) {
     let r = Matrix2::identity() * 500.0;
     let mut g = c.benchmark_group("imm");
@@ -61,15 +73,7 @@ fn bench(c: &mut Criterion) {
         for k in 0..4 {
             let t = k as f64 * 0.5;
             let (lat, lon, _) = at(t);
-            let obs = Observation::Position {
-                lat,
-                lon,
-                cov_en: Matrix2::identity() * 400.0,
-                height: Some((9000.0, 64.0)),
-                time_sigma_s: 0.01,
-                surface: false,
-            };
-            tr.apply(Measurement { t, source: Source::Mlat, obs });
+            tr.apply(Measurement { t, source: Source::Mlat, obs: position(lat, lon) });
         }
         tr
     };
@@ -121,18 +125,7 @@ fn bench(c: &mut Criterion) {
                             9000.0,
                             [100.0 * t, 50.0 * t, 0.0],
                         );
-                        let m = Measurement {
-                            t,
-                            source: Source::Adsb,
-                            obs: Observation::Position {
-                                lat,
-                                lon,
-                                cov_en: Matrix2::identity() * 400.0,
-                                height: Some((9000.0, 64.0)),
-                                time_sigma_s: 0.01,
-                                surface: false,
-                            },
-                        };
+                        let m = Measurement { t, source: Source::Adsb, obs: position(lat, lon) };
                         f.on_measurement(0x400000 + a, Some(8), m, t, &mut out);
                     }
                     out.clear();

@@ -818,7 +818,7 @@ mod tests {
         // 25 fixes say little about the noise (its estimate is uncertain by
         // 30%): the configured jitter still leads. Weighting by the estimate
         // alone once 20 fixes were in made the 1 Hz benchmark's fixes worse
-        // and overconfident (12.83 m, NEES 2.08; with the prior 12.73 m, 2.03).
+        // and overconfident (12.83 m, NEES 2.08; with the prior 12.73 m, 2.02).
         let early = m.rxs[0].sigma();
         assert!(early > 0.8 * configured, "{early} after 25 fixes");
         for k in 25..1200 {

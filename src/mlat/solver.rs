@@ -496,18 +496,20 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
     use rand_distr::{Distribution, Normal as Gauss, StandardNormal};
 
+    /// ECEF of (lat, lon, height) sites.
+    fn ecef(sites: &[(f64, f64, f64)]) -> Vec<[f64; 3]> {
+        sites.iter().map(|&(la, lo, h)| geodetic_to_ecef(la, lo, h)).collect()
+    }
+
     fn receivers() -> Vec<[f64; 3]> {
-        [
+        ecef(&[
             (43.98, 1.61, 150.0),
             (43.60, 2.05, 170.0),
             (43.20, 1.70, 190.0),
             (43.25, 1.10, 210.0),
             (43.70, 0.90, 230.0),
             (44.05, 1.20, 250.0),
-        ]
-        .iter()
-        .map(|&(la, lo, h)| geodetic_to_ecef(la, lo, h))
-        .collect()
+        ])
     }
 
     fn measure(rx: &[[f64; 3]], target: [f64; 3], sigma: f64, rng: &mut ChaCha8Rng) -> Vec<Measurement> {
@@ -577,7 +579,7 @@ mod tests {
         // within 14 m of one height, and a taxiing aircraft among them with
         // a barometric altitude (75 m): the height is barely determined, and
         // Gauss-Newton steps along it stay metres long near the optimum.
-        let rx: Vec<[f64; 3]> = [
+        let rx = ecef(&[
             (49.01779, 2.55040, 141.7),
             (49.02507, 2.58325, 139.6),
             (49.00358, 2.59394, 133.9),
@@ -586,10 +588,7 @@ mod tests {
             (48.99320, 2.50996, 147.8),
             (49.01367, 2.51804, 141.6),
             (49.01706, 2.54046, 142.4),
-        ]
-        .iter()
-        .map(|&(la, lo, h)| geodetic_to_ecef(la, lo, h))
-        .collect();
+        ]);
         let mut rng = ChaCha8Rng::seed_from_u64(5);
         let (mut fixed, mut se) = (0, 0.0);
         let runs = 400;
