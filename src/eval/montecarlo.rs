@@ -62,8 +62,6 @@ type SeedRow = (String, f64, usize, f64, usize, BTreeMap<u32, f64>);
 struct Acc {
     sse: f64,
     n: usize,
-    nees_sum: f64,
-    nees_n: usize,
     per_seed: Vec<f64>,
     /// Per run: NEES sum and number of samples.
     nees_per_seed: Vec<(f64, usize)>,
@@ -157,8 +155,6 @@ pub fn monte_carlo(
                 let a = accs.entry(name).or_default();
                 a.sse += sse;
                 a.n += n;
-                a.nees_sum += nees_sum;
-                a.nees_n += nees_n;
                 if nees_n > 0 {
                     a.nees_per_seed.push((nees_sum, nees_n));
                 }
@@ -183,7 +179,10 @@ pub fn monte_carlo(
                 source,
                 n: a.n,
                 h_rmse_m: (a.sse / a.n.max(1) as f64).sqrt(),
-                nees: (a.nees_n > 0).then(|| a.nees_sum / a.nees_n as f64),
+                nees: {
+                    let (sum, n) = a.nees_per_seed.iter().fold((0.0, 0), |(s, k), r| (s + r.0, k + r.1));
+                    (n > 0).then(|| sum / n as f64)
+                },
                 nees_band: runs_band(&a.nees_per_seed, 2.0),
                 epochs_in_band: epochs_in_band(&a.epochs, runs),
                 seeds: a.per_seed.len(),
