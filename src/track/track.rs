@@ -19,7 +19,11 @@
 //! forgetting; a source that claims better than it is gets its covariance
 //! scaled up and the track stays consistent. Gated measurements still teach
 //! the scale (from the innovation), else an over-claiming source would be
-//! gated forever.
+//! gated forever; but only once a restart has shown it is the noise and not
+//! the track that is wrong, and no more than an innovation on the gate.
+//! Taught at once and in full, a track started on one wild MLAT fix let the
+//! honest fixes after it open the gate by raising the scale, and crawled
+//! back over minutes (tma-busy's MLAT tracks: 570 m RMS, 74 m now).
 
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -153,7 +157,34 @@ struct State {
     imm: Option<Imm>,
     vertical: Option<Vertical>,
     vb: [Vb; 2],
+    pending: [Pending; 2],
     gated_in_a_row: u32,
+    /// Positions accepted since the horizontal filter (re)started.
+    accepted_since_start: u32,
+}
+
+/// What gated innovations would teach the VB scale, held back until it is
+/// clear whether the noise or the track was wrong. A track started on a wild
+/// position (an MLAT fix 30 km off on tma-busy) gates every honest position
+/// after it; taught at once, each raised the scale until they passed the gate
+/// and the track crawled back over minutes instead of restarting. Gated
+/// positions that a healthy track outlives are taught (a source claiming too
+/// much is gated often); so are those before a restart that did not cure the
+/// gating; those a restart cured are forgotten.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Pending {
+    alpha: f64,
+    beta: f64,
+    /// Gathered before the newest restart.
+    before_restart: bool,
+}
+
+impl Pending {
+    fn commit(&mut self, vb: &mut Vb) {
+        vb.alpha += self.alpha;
+        vb.beta += self.beta;
+        *self = Pending::default();
+    }
 }
 
 /// A track's estimate at a time, ready to publish or fuse.
@@ -320,7 +351,9 @@ impl Track {
                 imm: None,
                 vertical: None,
                 vb: [prior; 2],
+                pending: [Pending::default(); 2],
                 gated_in_a_row: 0,
+                accepted_since_start: 0,
             },
             cfg,
             history: VecDeque::new(),
@@ -641,21 +674,46 @@ impl Track {
         if nis.is_nan() || nis > self.gate {
             self.state.gated_in_a_row += 1;
             if self.cfg.vb {
-                // Learn from the innovation what the update cannot show.
+                // Learn from the innovation what the update cannot show, once
+                // it is clear the noise and not the track is wrong (`Pending`),
+                // and no more than an innovation on the gate would teach: one
+                // wild position must not carry the scale past the gate alone.
                 let (nu, _) = pred.innovation(&linear(1.0));
+                let nu = nu * (self.gate / nis).sqrt().min(1.0);
                 let hph = h * pred.p * h.transpose();
                 let excess = (nom_inv * (nu * nu.transpose() - hph)).trace().max(0.0);
-                vb.alpha += 1.0;
-                vb.beta += 0.5 * excess;
+                let pending = &mut self.state.pending[source as usize];
+                if pending.before_restart && self.state.accepted_since_start < self.cfg.max_gated_in_a_row {
+                    // The restart did not cure it: the measurements are noisy.
+                    pending.commit(vb);
+                }
+                pending.alpha += 1.0;
+                pending.beta += 0.5 * excess;
             }
             if self.state.gated_in_a_row > self.cfg.max_gated_in_a_row {
                 self.restarts += 1;
+                for (p, vb) in self.state.pending.iter_mut().zip(&mut self.state.vb) {
+                    // Failed twice in a row: not the track's fault.
+                    if p.before_restart {
+                        p.commit(vb);
+                    }
+                    p.before_restart = true;
+                }
                 self.start(lat, lon, cov_en);
                 return Outcome::Restarted;
             }
             return Outcome::Gated;
         }
         self.state.gated_in_a_row = 0;
+        self.state.accepted_since_start += 1;
+        let pending = &mut self.state.pending[source as usize];
+        if !pending.before_restart {
+            // Outliers the track outlived: they were the noise's.
+            pending.commit(vb);
+        } else if self.state.accepted_since_start >= self.cfg.max_gated_in_a_row {
+            // The restart cured it: the track was wrong, not the noise.
+            *pending = Pending::default();
+        }
         // One variational step per measurement: update with the current noise
         // scale, then the scale's posterior from that update's residual.
         // Iterating the two to a fixed point (up to three updates) changed
@@ -695,6 +753,7 @@ impl Track {
         self.state.plane = Some(plane);
         self.state.imm = Some(Imm::with_spec(self.spec.clone(), Gaussian { x: Vector6::zeros(), p }));
         self.state.gated_in_a_row = 0;
+        self.state.accepted_since_start = 0;
     }
 
     /// `x`: the filter's newest combined estimate.
@@ -939,6 +998,31 @@ mod tests {
         // Claimed 10 m, real 100 m: the scale approaches 100.
         let s = tr.vb_scale(Source::Adsb);
         assert!((50.0..200.0).contains(&s), "scale {s}");
+    }
+
+    #[test]
+    fn a_track_started_on_a_wild_position_restarts_on_the_good_ones() {
+        // tma-busy: an MLAT track started on a fix 30 km off (a wrong
+        // solution); the honest fixes that followed were gated, but each
+        // taught the VB scale its whole innovation, the scale rose until they
+        // passed the gate, and the track crawled back over 100 s.
+        let mut tr = track();
+        let (lat, lon) = truth(0.0);
+        let (lat, lon, _) = crate::geo::displace(lat, lon, 3000.0, [30_000.0, 0.0, 0.0]);
+        tr.apply(pos(0.0, lat, lon, 10.0));
+        for k in 1..20 {
+            let t = k as f64;
+            let (lat, lon) = truth(t);
+            tr.apply(pos(t, lat, lon, 10.0));
+        }
+        let (lat, lon) = truth(19.0);
+        let e = tr.estimate_at(19.0).unwrap();
+        let err = crate::geo::distance_m(lat, lon, e.lat, e.lon);
+        assert_eq!(tr.restarts, 1);
+        assert!(err < 30.0, "{err} m off");
+        // What the gated innovations taught is bounded by the gate.
+        let s = tr.vb_scale(Source::Adsb);
+        assert!(s < 5.0, "scale {s}");
     }
 
     #[test]
