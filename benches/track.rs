@@ -37,6 +37,7 @@ fn position(lat: f64, lon: f64) -> fuse1090::track::Observation {
         height: Some((9000.0, 64.0)),
         time_sigma_s: 0.01,
         surface: false,
+        claimed: true,
     }
 }
 

@@ -311,6 +311,7 @@ impl Front {
                     height: p.alt_m.zip(p.alt_sigma_m.map(|s| s * s)),
                     time_sigma_s,
                     surface: p.surface,
+                    claimed: p.nac_p.is_some_and(|n| n > 0),
                 },
             };
             out.push(Cmd::Measure { addr, nac_p: p.nac_p, m, now: arrival });
@@ -448,6 +449,7 @@ impl GroupCtx<'_> {
                 height: None,
                 time_sigma_s: 0.0,
                 surface: false,
+                claimed: true,
             },
         };
         let (addr, t) = (fix.addr, fix.t);

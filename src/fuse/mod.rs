@@ -750,6 +750,7 @@ mod tests {
                 height: Some((3000.0, 100.0)),
                 time_sigma_s: 0.0,
                 surface: false,
+                claimed: true,
             },
         }
     }
@@ -778,6 +779,7 @@ mod tests {
                 height: None,
                 time_sigma_s: 0.0,
                 surface: false,
+                claimed: true,
             },
             ..pos(100.0, 45.0, 5.0)
         };

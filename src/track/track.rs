@@ -56,7 +56,9 @@ pub enum Observation {
     /// Horizontal position with its covariance (east/north, m^2), an
     /// optional height (m, variance) and the 1-sigma uncertainty of the
     /// measurement's time (s), which becomes along-track error.
-    /// `surface`: an ADS-B surface position.
+    /// `surface`: an ADS-B surface position. `claimed`: the covariance is
+    /// the source's own claim (NACp, an MLAT fix's), not a stand-in (an
+    /// ADS-B position before its NACp is known).
     Position {
         lat: f64,
         lon: f64,
@@ -64,6 +66,7 @@ pub enum Observation {
         height: Option<(f64, f64)>,
         time_sigma_s: f64,
         surface: bool,
+        claimed: bool,
     },
     /// Ground velocity (east, north m/s, covariance) and climb rate (m/s, variance).
     Velocity { v_en: Vector2<f64>, cov: Matrix2<f64>, climb: Option<(f64, f64)> },
@@ -158,6 +161,9 @@ struct State {
     vertical: Option<Vertical>,
     vb: [Vb; 2],
     pending: [Pending; 2],
+    /// Trace of each source's newest nominal covariance (m^2), and whether
+    /// it was the source's own claim.
+    nominal: [Option<(f64, bool)>; 2],
     gated_in_a_row: u32,
     /// Positions accepted since the horizontal filter (re)started.
     accepted_since_start: u32,
@@ -352,6 +358,7 @@ impl Track {
                 vertical: None,
                 vb: [prior; 2],
                 pending: [Pending::default(); 2],
+                nominal: [None; 2],
                 gated_in_a_row: 0,
                 accepted_since_start: 0,
             },
@@ -483,10 +490,11 @@ impl Track {
     fn apply_one(&mut self, m: &Measurement) -> Outcome {
         let dt = if self.state.t_h.is_finite() { m.t - self.state.t_h } else { 0.0 };
         let outcome = match m.obs {
-            Observation::Position { lat, lon, cov_en, height, time_sigma_s, .. } => {
+            Observation::Position { lat, lon, cov_en, height, time_sigma_s, claimed, .. } => {
                 if let Some((h, var)) = height {
                     self.vertical(m.t, 0, h, var);
                 }
+                self.rebase_vb(m.source, cov_en.trace(), claimed);
                 self.position(m.t, dt, lat, lon, cov_en, time_sigma_s, m.source)
             }
             Observation::Velocity { v_en, cov, climb } => {
@@ -743,6 +751,25 @@ impl Track {
         }
     }
 
+    /// A source's nominal noise changes from a stand-in to its own claim
+    /// (the NACp arrives): what the scale learned under the stand-in is the
+    /// real noise, so it is kept in metres, not as a ratio to a nominal that
+    /// no longer applies. (vb-noise sends NACp every 10 s: a transponder
+    /// honestly claiming NACp 6 was first judged against the 38 m stand-in,
+    /// and the ratio learned then, carried into its real claim, made its
+    /// ADS-B track 486 m RMS against 189 m without VB.)
+    fn rebase_vb(&mut self, source: Source, trace: f64, claimed: bool) {
+        let i = source as usize;
+        if let Some((old, false)) = self.state.nominal[i] {
+            if self.cfg.vb && claimed && old > 0.0 && trace > 0.0 {
+                let k = old / trace;
+                self.state.vb[i].beta *= k;
+                self.state.pending[i].beta *= k;
+            }
+        }
+        self.state.nominal[i] = Some((trace, claimed));
+    }
+
     /// (Re)starts the horizontal filter on a position: velocity unknown.
     fn start(&mut self, lat: f64, lon: f64, cov_en: Matrix2<f64>) {
         let plane = Plane::new(lat, lon, self.state.vertical.map_or(0.0, |v| v.x[0]));
@@ -843,6 +870,7 @@ mod tests {
                 height: Some((3000.0, 100.0)),
                 time_sigma_s: 0.0,
                 surface: false,
+                claimed: true,
             },
         }
     }
@@ -998,6 +1026,38 @@ mod tests {
         // Claimed 10 m, real 100 m: the scale approaches 100.
         let s = tr.vb_scale(Source::Adsb);
         assert!((50.0..200.0).contains(&s), "scale {s}");
+    }
+
+    #[test]
+    fn what_vb_learned_under_a_stand_in_is_kept_in_metres_when_the_claim_arrives() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let real = Normal::new(0.0, 100.0).unwrap();
+        let mut tr = track();
+        for k in 0..100 {
+            let t = k as f64;
+            let (lat, lon) = truth(t);
+            let (lat, lon, _) =
+                crate::geo::displace(lat, lon, 3000.0, [real.sample(&mut rng), real.sample(&mut rng), 0.0]);
+            // A 25 m stand-in for 60 s, then the source's honest claim of 100 m.
+            let mut m = pos(t, lat, lon, if k < 60 { 25.0 } else { 100.0 });
+            if let Observation::Position { claimed, .. } = &mut m.obs {
+                *claimed = k >= 60;
+            }
+            tr.apply(m);
+            let s = tr.vb_scale(Source::Adsb);
+            if k == 59 {
+                assert!(s > 6.0, "learned against the stand-in: {s}");
+            }
+            if k == 62 {
+                // Carried over as a ratio, what was learned against the
+                // stand-in makes it 54 here; kept in metres, it is the
+                // stand-in's learned scale divided by 16 (3.6: that one, 63,
+                // had overshot the real 16; not chased).
+                assert!((0.5..5.0).contains(&s), "scale {s} just after the claim");
+            }
+        }
     }
 
     #[test]
