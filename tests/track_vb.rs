@@ -61,8 +61,7 @@ fn adsb_track(vb: bool, seeds: u64) -> (f64, f64, (f64, [f64; 2]), Vec<f64>) {
         (se / n.max(1) as f64).sqrt(),
         nees / n.max(1) as f64,
         (
-            late_runs.iter().map(|r| r.0).sum::<f64>()
-                / late_runs.iter().map(|r| r.1).sum::<usize>().max(1) as f64,
+            fuse1090::eval::montecarlo::pooled_nees(&late_runs).expect("late estimates"),
             fuse1090::eval::montecarlo::runs_band(&late_runs, 2.0).expect("runs"),
         ),
         scales,

@@ -179,10 +179,7 @@ pub fn monte_carlo(
                 source,
                 n: a.n,
                 h_rmse_m: (a.sse / a.n.max(1) as f64).sqrt(),
-                nees: {
-                    let (sum, n) = a.nees_per_seed.iter().fold((0.0, 0), |(s, k), r| (s + r.0, k + r.1));
-                    (n > 0).then(|| sum / n as f64)
-                },
+                nees: pooled_nees(&a.nees_per_seed),
                 nees_band: runs_band(&a.nees_per_seed, 2.0),
                 epochs_in_band: epochs_in_band(&a.epochs, runs),
                 seeds: a.per_seed.len(),
@@ -190,6 +187,13 @@ pub fn monte_carlo(
             }
         })
         .collect())
+}
+
+/// Pooled mean NEES (`sum of sums / sum of counts`) of runs given as each
+/// run's NEES sum and count; `None` without any sample.
+pub fn pooled_nees(per_run: &[(f64, usize)]) -> Option<f64> {
+    let (sum, n) = per_run.iter().fold((0.0, 0), |(s, k), r| (s + r.0, k + r.1));
+    (n > 0).then(|| sum / n as f64)
 }
 
 /// 95% band of the pooled mean NEES (`sum of sums / sum of counts`) of a

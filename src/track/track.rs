@@ -1009,18 +1009,24 @@ mod tests {
         assert!(tr.estimate_at(599.0).unwrap().state.x.fixed_rows::<2>(0).norm() < RECENTRE_M);
     }
 
+    /// The truth at `t` displaced by white noise of `sigma_m` per axis.
+    fn noisy_truth(t: f64, sigma_m: f64, rng: &mut rand_chacha::ChaCha8Rng) -> (f64, f64) {
+        use rand_distr::{Distribution, Normal};
+        let real = Normal::new(0.0, sigma_m).unwrap();
+        let (lat, lon) = truth(t);
+        let (lat, lon, _) =
+            crate::geo::displace(lat, lon, 3000.0, [real.sample(&mut *rng), real.sample(&mut *rng), 0.0]);
+        (lat, lon)
+    }
+
     #[test]
     fn vb_learns_a_source_that_claims_too_much() {
         use rand::SeedableRng;
-        use rand_distr::{Distribution, Normal};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-        let real = Normal::new(0.0, 100.0).unwrap();
         let mut tr = track();
         for k in 0..200 {
             let t = k as f64;
-            let (lat, lon) = truth(t);
-            let (lat, lon, _) =
-                crate::geo::displace(lat, lon, 3000.0, [real.sample(&mut rng), real.sample(&mut rng), 0.0]);
+            let (lat, lon) = noisy_truth(t, 100.0, &mut rng);
             tr.apply(pos(t, lat, lon, 10.0));
         }
         // Claimed 10 m, real 100 m: the scale approaches 100.
@@ -1031,15 +1037,11 @@ mod tests {
     #[test]
     fn what_vb_learned_under_a_stand_in_is_kept_in_metres_when_the_claim_arrives() {
         use rand::SeedableRng;
-        use rand_distr::{Distribution, Normal};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
-        let real = Normal::new(0.0, 100.0).unwrap();
         let mut tr = track();
         for k in 0..100 {
             let t = k as f64;
-            let (lat, lon) = truth(t);
-            let (lat, lon, _) =
-                crate::geo::displace(lat, lon, 3000.0, [real.sample(&mut rng), real.sample(&mut rng), 0.0]);
+            let (lat, lon) = noisy_truth(t, 100.0, &mut rng);
             // A 25 m stand-in for 60 s, then the source's honest claim of 100 m.
             let mut m = pos(t, lat, lon, if k < 60 { 25.0 } else { 100.0 });
             if let Observation::Position { claimed, .. } = &mut m.obs {
