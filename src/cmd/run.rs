@@ -97,27 +97,29 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
     let out_file = File::create(output).with_context(|| format!("cannot create {}", output.display()))?;
     let name = capture.display().to_string();
     let (tx, rx) = std::sync::mpsc::sync_channel::<Vec<CaptureRecord>>(8);
-    let parser = std::thread::spawn(move || -> Result<(u64, Vec<crate::feed::capture::LineError>)> {
-        let mut reader = CaptureReader::new(BufReader::with_capacity(1 << 20, file), name.clone());
-        let mut batch = Vec::with_capacity(BATCH);
-        while let Some(rec) = reader.next_record().with_context(|| format!("reading {name}"))? {
-            batch.push(rec);
-            if batch.len() == BATCH
-                && tx.send(std::mem::replace(&mut batch, Vec::with_capacity(BATCH))).is_err()
-            {
-                break;
+    // Named so `top -H` and `perf report --sort comm` tell the stages apart.
+    let parser =
+        named_thread("capture-parse", move || -> Result<(u64, Vec<crate::feed::capture::LineError>)> {
+            let mut reader = CaptureReader::new(BufReader::with_capacity(1 << 20, file), name.clone());
+            let mut batch = Vec::with_capacity(BATCH);
+            while let Some(rec) = reader.next_record().with_context(|| format!("reading {name}"))? {
+                batch.push(rec);
+                if batch.len() == BATCH
+                    && tx.send(std::mem::replace(&mut batch, Vec::with_capacity(BATCH))).is_err()
+                {
+                    break;
+                }
             }
-        }
-        if !batch.is_empty() {
-            let _ = tx.send(batch);
-        }
-        Ok((reader.skipped, reader.errors))
-    });
+            if !batch.is_empty() {
+                let _ = tx.send(batch);
+            }
+            Ok((reader.skipped, reader.errors))
+        })?;
     let mut core_cfg = cfg.core.clone();
     core_cfg.publish_source_tracks = cfg.publish_source_tracks;
     let (mut front, mut back) = Core::stages(&core_cfg);
     let (cmd_tx, cmd_rx) = std::sync::mpsc::sync_channel::<Vec<Cmd>>(8);
-    let writer = std::thread::spawn(move || -> (Back, Result<()>) {
+    let writer = named_thread("core-back", move || -> (Back, Result<()>) {
         let mut out = BufWriter::with_capacity(1 << 20, out_file);
         let mut events = Vec::new();
         let write = || -> Result<()> {
@@ -131,7 +133,7 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
         };
         let res = write();
         (back, res)
-    });
+    })?;
     let (mut first, mut last) = (f64::INFINITY, f64::NEG_INFINITY);
     let mut cmds = Vec::new();
     for batch in rx {
@@ -176,4 +178,14 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
         span_s: if last >= first { last - first } else { 0.0 },
         elapsed_s: started.elapsed().as_secs_f64(),
     })
+}
+
+fn named_thread<T: Send + 'static>(
+    name: &str,
+    f: impl FnOnce() -> T + Send + 'static,
+) -> Result<std::thread::JoinHandle<T>> {
+    std::thread::Builder::new()
+        .name(name.to_string())
+        .spawn(f)
+        .with_context(|| format!("cannot start the {name} thread"))
 }
