@@ -101,3 +101,22 @@ fn the_1hz_benchmark_bound_for_a_filter_told_the_segment_times() {
     // The paper's figure is below what such a filter can honestly claim.
     assert!((8.9..9.6).contains(&rmse), "{rmse}");
 }
+
+/// Issue 5's consistency target on fusion-8seg: the default IMM's ADS-B-only
+/// and MLAT-only tracks each keep a pooled mean NEES inside the band of 400
+/// runs. The MLAT-only track, positions only at about 5 Hz, is the sensitive
+/// one: with the current-statistical model's manoeuvre rate at 0.5/s it sat
+/// at 2.06 against 1.98-2.02 (too slow to follow an acceleration onset).
+#[test]
+fn single_source_tracks_are_consistent_at_real_rates() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let s = Scenario::load(&root.join("fixtures/scenarios/fusion-8seg.toml")).unwrap();
+    let cfg = Config::load(&root.join("fixtures/configs/every-transmission.toml")).unwrap();
+    let rows = monte_carlo(&s, &cfg.core, &[Method::Measurement], 1..401).unwrap();
+    eprintln!("{}", fuse1090::eval::montecarlo::table(&rows));
+    for source in ["adsb", "mlat"] {
+        let r = row(&rows, source);
+        let (nees, band) = (r.nees.unwrap(), r.nees_band.unwrap());
+        assert!(band[0] <= nees && nees <= band[1], "{source}: NEES {nees} outside {band:?}");
+    }
+}

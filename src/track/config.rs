@@ -125,7 +125,7 @@ impl Default for TrackConfig {
                 ModelConfig::Cv { q: 0.05 },
                 ModelConfig::Ct { turn_dps: 3.0, q: 0.05 },
                 ModelConfig::Ct { turn_dps: -3.0, q: 0.05 },
-                ModelConfig::Cs { alpha: 0.5, a_max: 8.0 },
+                ModelConfig::Cs { alpha: 1.0, a_max: 8.0 },
             ],
             stay: 0.9,
             transition: None,
