@@ -241,5 +241,7 @@ fn two_threads_write_the_same_bytes_as_one() {
     let single = fuse1090::eval::montecarlo::run_in_memory(&capture, &core_cfg).unwrap();
     let text = String::from_utf8_lossy(&single);
     assert!(text.contains("adsb_suspect") && text.contains("\"mlat\"") && text.contains("\"track\""));
+    // The front's events (written on its thread) between the back's tracks.
+    assert!(text.contains("\"type\":\"position\""));
     assert!(threaded == single, "outputs differ");
 }

@@ -10,7 +10,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 
 use crate::config::Config;
-use crate::core::{Back, Cmd, Core};
+use crate::core::{Back, Cmd, Core, Event, Front};
 use crate::feed::capture::{CaptureReader, CaptureRecord};
 use crate::publish::json::write_event;
 
@@ -84,13 +84,46 @@ pub fn run(args: RunArgs) -> Result<()> {
 /// Records per batch handed from the parsing thread to the core.
 const BATCH: usize = 4096;
 
+/// A batch of the front stage's commands for the back stage, with the front's
+/// own events (ADS-B reports, MLAT fixes) already written as JSON lines:
+/// `text[ends[k-1]..ends[k]]` is the k-th. The back stage is the pipeline's
+/// critical path and those events are over half of the output's bytes, so
+/// the front's thread, which had time to spare, writes them.
+struct Batch {
+    cmds: Vec<Cmd>,
+    text: Vec<u8>,
+    ends: Vec<usize>,
+}
+
+impl Batch {
+    fn written(cmds: Vec<Cmd>, front: &Front) -> Batch {
+        let (mut text, mut ends) = (Vec::new(), Vec::new());
+        for c in &cmds {
+            if let Cmd::Event(ev) = c {
+                if Self::from_front(ev) {
+                    // Into memory: cannot fail.
+                    let _ = write_event(&mut text, ev, |i| front.receiver_id(i));
+                    ends.push(text.len());
+                }
+            }
+        }
+        Batch { cmds, text, ends }
+    }
+
+    /// The events the front stage makes (the back makes tracks and alerts).
+    fn from_front(ev: &Event) -> bool {
+        matches!(ev, Event::Position(_) | Event::Mlat(_))
+    }
+}
+
 /// Runs a capture file through the core and writes the event stream.
 ///
 /// Three threads for the machine's two cores: one parses the capture into
 /// batches, one runs the core's front stage (decoding, grouping, MLAT,
-/// conformance), one its back stage (tracking, fusion) and writes. Batches
-/// keep the file's order and nothing flows back from the back stage, so the
-/// output is the same bytes as a single-threaded run.
+/// conformance) and writes its events' JSON, one its back stage (tracking,
+/// fusion) and writes the file. Batches keep the file's order and nothing
+/// flows back from the back stage, so the output is the same bytes as a
+/// single-threaded run.
 pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summary> {
     let started = Instant::now();
     let file = File::open(capture).with_context(|| format!("cannot open {}", capture.display()))?;
@@ -118,15 +151,27 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
     let mut core_cfg = cfg.core.clone();
     core_cfg.publish_source_tracks = cfg.publish_source_tracks;
     let (mut front, mut back) = Core::stages(&core_cfg);
-    let (cmd_tx, cmd_rx) = std::sync::mpsc::sync_channel::<Vec<Cmd>>(8);
+    let (cmd_tx, cmd_rx) = std::sync::mpsc::sync_channel::<Batch>(8);
     let writer = named_thread("core-back", move || -> (Back, Result<()>) {
         let mut out = BufWriter::with_capacity(1 << 20, out_file);
         let mut events = Vec::new();
         let write = || -> Result<()> {
-            for cmds in cmd_rx {
-                back.apply(cmds, &mut events);
+            for batch in cmd_rx {
+                back.apply(batch.cmds, &mut events);
+                // The front's own events come in the order of their commands,
+                // already written out; the back's are written here between them.
+                let mut ends = batch.ends.iter();
+                let mut start = 0;
                 for ev in events.drain(..) {
-                    write_event(&mut out, &ev, |i| back.receiver_id(i)).context("writing output")?;
+                    let written = if Batch::from_front(&ev) {
+                        let end = *ends.next().context("a front event without its text")?;
+                        let text = &batch.text[start..end];
+                        start = end;
+                        out.write_all(text)
+                    } else {
+                        write_event(&mut out, &ev, |i| back.receiver_id(i))
+                    };
+                    written.context("writing output")?;
                 }
             }
             out.flush().context("writing output")
@@ -148,13 +193,14 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
         // The next batch's buffer at this one's size: growing a vector of
         // commands from empty every batch cost more than the commands' moves.
         let cap = cmds.len();
-        if cmd_tx.send(std::mem::replace(&mut cmds, Vec::with_capacity(cap))).is_err() {
+        let batch = Batch::written(std::mem::replace(&mut cmds, Vec::with_capacity(cap)), &front);
+        if cmd_tx.send(batch).is_err() {
             break;
         }
     }
     let (skipped, errors) = parser.join().map_err(|_| anyhow::anyhow!("capture reader panicked"))??;
     front.finish(&mut cmds);
-    let _ = cmd_tx.send(cmds);
+    let _ = cmd_tx.send(Batch::written(cmds, &front));
     drop(cmd_tx);
     let (back, written) = writer.join().map_err(|_| anyhow::anyhow!("tracking thread panicked"))?;
     written?;
