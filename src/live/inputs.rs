@@ -44,6 +44,9 @@ pub struct Registry {
     pub receivers: RwLock<Vec<(ReceiverConfig, Arc<RxCounters>)>>,
     pub unknown_senders: AtomicU64,
     pub queue_drops: AtomicU64,
+    /// Bumped whenever `receivers` changes (SIGHUP), so the inputs' caches
+    /// of it know to refresh.
+    pub generation: AtomicU64,
 }
 
 impl Registry {
@@ -69,11 +72,12 @@ impl Registry {
     }
 }
 
-/// Parser output to the core.
-fn forward(tx: &SyncSender<ToCore>, reg: &Registry, c: &RxCounters, rx: usize, ev: FeedEvent) {
+/// Parser output to the core. `arrival` is when the bytes carrying it were
+/// read: the frames of one datagram or one read arrived together.
+fn forward(tx: &SyncSender<ToCore>, reg: &Registry, c: &RxCounters, rx: usize, arrival: f64, ev: FeedEvent) {
     if let FeedEvent::Frame(frame) = ev {
         c.frames.fetch_add(1, Ordering::Relaxed);
-        match tx.try_send(ToCore::Frame { rx, arrival: unix_now(), frame }) {
+        match tx.try_send(ToCore::Frame { rx, arrival, frame }) {
             Ok(()) => {}
             Err(TrySendError::Full(_)) => {
                 c.queue_drops.fetch_add(1, Ordering::Relaxed);
@@ -99,9 +103,10 @@ async fn stream(
         if n == 0 {
             return Ok(());
         }
+        let arrival = unix_now();
         c.bytes.fetch_add(n as u64, Ordering::Relaxed);
         let before = parser.stats().input_errors();
-        parser.push(&buf[..n], &mut |ev| forward(tx, reg, &c, rx, ev));
+        parser.push(&buf[..n], &mut |ev| forward(tx, reg, &c, rx, arrival, ev));
         c.input_errors.fetch_add(parser.stats().input_errors() - before, Ordering::Relaxed);
     }
 }
@@ -200,26 +205,48 @@ async fn udp(input: &InputConfig, tx: &SyncSender<ToCore>, reg: &Registry) -> st
     let fixed = input.receiver.as_deref().and_then(|id| reg.index_of(id));
     let mut parsers: HashMap<usize, Box<dyn FrameParser + Send>> = HashMap::new();
     let mut buckets: HashMap<usize, Bucket> = HashMap::new();
+    // Known senders' receiver, counters and rate: a datagram costs no scan
+    // of the registry and no lock (200 receivers at 1 M frames/s made that a
+    // tenth of this task's time). Only known senders are kept, so it is
+    // bounded by the receivers; refreshed when the registry changes.
+    let mut senders: HashMap<IpAddr, (usize, Arc<RxCounters>, f64)> = HashMap::new();
+    let mut generation = reg.generation.load(Ordering::Relaxed);
     let mut buf = vec![0u8; 65_536];
+    let mut frames = Vec::new();
     loop {
         let (n, peer): (usize, SocketAddr) = sock.recv_from(&mut buf).await?;
-        let Some(rx) = fixed.or_else(|| reg.by_source(peer.ip(), input)) else {
+        let arrival = unix_now();
+        let now_generation = reg.generation.load(Ordering::Relaxed);
+        if now_generation != generation {
+            senders.clear();
+            generation = now_generation;
+        }
+        // A socket of one receiver takes any sender: keyed by that receiver,
+        // not by address, or a spray of source addresses would grow it.
+        let key = if fixed.is_some() { IpAddr::from([0, 0, 0, 0]) } else { peer.ip() };
+        let sender = match senders.get(&key) {
+            Some(s) => Some(s.clone()),
+            None => fixed.or_else(|| reg.by_source(peer.ip(), input)).map(|rx| {
+                let s = (rx, reg.counters(rx), reg.max_rate(rx));
+                senders.insert(key, s.clone());
+                s
+            }),
+        };
+        let Some((rx, c, rate)) = sender else {
             let k = reg.unknown_senders.fetch_add(1, Ordering::Relaxed) + 1;
             if k.is_power_of_two() {
                 tracing::warn!(peer = %peer, refused = k, "datagram from an unknown sender dropped");
             }
             continue;
         };
-        let c = reg.counters(rx);
         c.bytes.fetch_add(n as u64, Ordering::Relaxed);
-        let rate = reg.max_rate(rx);
         let parser = parsers.entry(rx).or_insert_with(|| parser_for(format));
         let before = parser.stats().input_errors();
-        let mut frames = Vec::new();
+        frames.clear();
         parser.push_datagram(&buf[..n], &mut |ev| frames.push(ev));
         c.input_errors.fetch_add(parser.stats().input_errors() - before, Ordering::Relaxed);
         if rate > 0.0 {
-            let now = unix_now();
+            let now = arrival;
             let b = buckets.entry(rx).or_insert(Bucket { tokens: rate, at: now });
             b.tokens = (b.tokens + (now - b.at) * rate).min(rate);
             b.at = now;
@@ -228,8 +255,8 @@ async fn udp(input: &InputConfig, tx: &SyncSender<ToCore>, reg: &Registry) -> st
             c.throttled.fetch_add((frames.len() - allowed) as u64, Ordering::Relaxed);
             frames.truncate(allowed);
         }
-        for ev in frames {
-            forward(tx, reg, &c, rx, ev);
+        for ev in frames.drain(..) {
+            forward(tx, reg, &c, rx, arrival, ev);
         }
     }
 }

@@ -137,6 +137,7 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
                                 }
                             }
                         }
+                        registry.generation.fetch_add(1, Ordering::Relaxed);
                         let _ = tx.send(ToCore::Outputs(Outputs::new(&new.output, &new.service)));
                         if new.input != current.input {
                             for t in tasks.drain(..) {
