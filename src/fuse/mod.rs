@@ -387,9 +387,14 @@ impl Fuser {
             return;
         };
         let n = a.waiting.partition_point(|(_, w)| w.t <= upto);
-        let batch: Vec<Measurement> = a.waiting.drain(..n).map(|(_, w)| w).collect();
-        for m in batch {
+        // Applied straight from the queue, lent out while `apply` borrows the
+        // fuser (it never touches the queue): no copy into a new vector.
+        let mut waiting = std::mem::take(&mut a.waiting);
+        for (_, m) in waiting.drain(..n) {
             self.apply(addr, m);
+        }
+        if let Some(a) = self.aircraft.get_mut(&addr) {
+            a.waiting = waiting;
         }
         self.publish(addr, out);
     }
