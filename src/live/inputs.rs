@@ -206,9 +206,10 @@ async fn udp(input: &InputConfig, tx: &SyncSender<ToCore>, reg: &Registry) -> st
     let mut parsers: HashMap<usize, Box<dyn FrameParser + Send>> = HashMap::new();
     let mut buckets: HashMap<usize, Bucket> = HashMap::new();
     // Known senders' receiver, counters and rate: a datagram costs no scan
-    // of the registry and no lock (200 receivers at 1 M frames/s made that a
-    // tenth of this task's time). Only known senders are kept, so it is
-    // bounded by the receivers; refreshed when the registry changes.
+    // of the registry and no lock (with a clock reading per frame, a seventh
+    // of this task's time with 200 receivers at 1 M frames/s). Only known
+    // senders are kept, so it is bounded by the receivers; refreshed when
+    // the registry changes.
     let mut senders: HashMap<IpAddr, (usize, Arc<RxCounters>, f64)> = HashMap::new();
     let mut generation = reg.generation.load(Ordering::Relaxed);
     let mut buf = vec![0u8; 65_536];
@@ -246,10 +247,9 @@ async fn udp(input: &InputConfig, tx: &SyncSender<ToCore>, reg: &Registry) -> st
         parser.push_datagram(&buf[..n], &mut |ev| frames.push(ev));
         c.input_errors.fetch_add(parser.stats().input_errors() - before, Ordering::Relaxed);
         if rate > 0.0 {
-            let now = arrival;
-            let b = buckets.entry(rx).or_insert(Bucket { tokens: rate, at: now });
-            b.tokens = (b.tokens + (now - b.at) * rate).min(rate);
-            b.at = now;
+            let b = buckets.entry(rx).or_insert(Bucket { tokens: rate, at: arrival });
+            b.tokens = (b.tokens + (arrival - b.at) * rate).min(rate);
+            b.at = arrival;
             let allowed = (b.tokens.max(0.0) as usize).min(frames.len());
             b.tokens -= frames.len() as f64;
             c.throttled.fetch_add((frames.len() - allowed) as u64, Ordering::Relaxed);
