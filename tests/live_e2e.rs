@@ -4,7 +4,8 @@
 //! subscribers (JSON and ASTERIX CAT062), and the faults an operator meets:
 //! an unknown sender, garbage and a half frame on a socket, an unreachable
 //! subscriber, a receiver whose stream ends (and the client reconnecting),
-//! SIGHUP with a changed output list, SIGTERM.
+//! SIGHUP with a changed output list, SIGTERM; and, on a daemon of its own,
+//! SIGHUP moving a UDP receiver to another source address.
 //!
 //! The ASTERIX output is decoded by an independent decoder (the
 //! `asterix_decoder` Python package, which `.ci/run` installs in `.venv`)
@@ -354,4 +355,88 @@ fn daemon_end_to_end_over_loopback_with_faults() {
         }
     }
     assert!(matched as f64 > 0.9 * decoded.len() as f64, "{matched} of {} matched", decoded.len());
+}
+
+/// A SIGHUP that moves a UDP receiver to another source address: datagrams
+/// from the old address are refused from then on and the new one's are the
+/// receiver's (the UDP input keeps a per-address cache of the receivers,
+/// which the re-read must refresh).
+#[test]
+fn sighup_moves_a_udp_receiver_to_its_new_source_address() {
+    let dir = std::env::temp_dir().join(format!("fuse1090-e2e-hup-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let port = free_port();
+    let cfg = |source: &str| {
+        format!(
+            "[service]\nstats_interval_s = 0.2\n\n[[receiver]]\nid = \"moved\"\nlat = 45.0\nlon = 5.0\n\
+             alt_m = 100.0\nclock = \"beast12\"\nsource = \"{source}\"\n\n[[input]]\nkind = \"udp\"\n\
+             address = \"127.0.0.1:{port}\"\n"
+        )
+    };
+    let cfg_path = dir.join("hup.toml");
+    std::fs::write(&cfg_path, cfg("127.0.3.1")).unwrap();
+    let log_path = dir.join("hup.log");
+    let mut daemon = bin()
+        .args(["run", "--config"])
+        .arg(&cfg_path)
+        .env("RUST_LOG", "info")
+        .stderr(Stdio::from(std::fs::File::create(&log_path).unwrap()))
+        .stdout(Stdio::null())
+        .spawn()
+        .unwrap();
+    // Polls the log: a loaded CI machine may take its time to start or re-read.
+    let wait_for = |needle: &str| {
+        let t0 = Instant::now();
+        while !std::fs::read_to_string(&log_path).unwrap_or_default().contains(needle) {
+            assert!(t0.elapsed() < Duration::from_secs(10), "no {needle:?} in the log");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    };
+    wait_for("running inputs=");
+    // One Beast Mode S long frame per datagram (the input counts frames
+    // before any CRC check).
+    let mut frame = vec![0x1a, b'3', 0, 0, 0, 0, 0, 1, 0x80];
+    frame.extend_from_slice(&[
+        0x8d, 0x40, 0x62, 0x1d, 0x58, 0xc3, 0x82, 0xd6, 0x90, 0xc8, 0xac, 0x28, 0x63, 0xa7,
+    ]);
+    let send = |from: &str, n: usize| {
+        let s = UdpSocket::bind(format!("{from}:0")).unwrap();
+        for _ in 0..n {
+            s.send_to(&frame, ("127.0.0.1", port)).unwrap();
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    };
+    // The receiver's count in the newest stats line.
+    let counted = || -> u64 {
+        let log = std::fs::read_to_string(&log_path).unwrap_or_default();
+        let last = log.lines().rev().find(|l| l.contains("stats: frames")).unwrap_or("");
+        last.split("moved=")
+            .nth(1)
+            .and_then(|r| r.split('/').next())
+            .and_then(|n| n.parse().ok())
+            .unwrap_or(0)
+    };
+    // "running" comes before the socket is bound: send until it counts.
+    let t0 = Instant::now();
+    while counted() == 0 {
+        assert!(t0.elapsed() < Duration::from_secs(10), "nothing counted from the configured address");
+        send("127.0.3.1", 1);
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    let before = counted();
+    std::fs::write(&cfg_path, cfg("127.0.3.2")).unwrap();
+    signal(&daemon, "HUP");
+    wait_for("SIGHUP: configuration re-read");
+    send("127.0.3.1", 3);
+    send("127.0.3.2", 7);
+    std::thread::sleep(Duration::from_millis(500));
+    signal(&daemon, "TERM");
+    assert!(daemon.wait().unwrap().success());
+    let log = std::fs::read_to_string(&log_path).unwrap();
+    let hup = log.find("SIGHUP: configuration re-read").expect("SIGHUP logged");
+    let refused = "datagram from an unknown sender dropped";
+    assert!(!log[..hup].contains(refused), "refused before the move:\n{log}");
+    assert!(log[hup..].contains(refused), "old address still taken:\n{log}");
+    assert_eq!(counted(), before + 7, "the new address's 7 and none of the old one's after the move");
 }

@@ -124,7 +124,6 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
             _ = hup.recv() => {
                 match Config::load(&path) {
                     Ok(new) => {
-                        tracing::info!("SIGHUP: configuration re-read");
                         for r in &new.receiver {
                             if registry.index_of(&r.id).is_none() {
                                 registry.receivers.write().expect("registry").push((r.clone(), Default::default()));
@@ -138,6 +137,8 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
                             }
                         }
                         registry.generation.fetch_add(1, Ordering::Relaxed);
+                        // Logged once the receivers are in place (tests wait for it).
+                        tracing::info!("SIGHUP: configuration re-read");
                         let _ = tx.send(ToCore::Outputs(Outputs::new(&new.output, &new.service)));
                         if new.input != current.input {
                             for t in tasks.drain(..) {
