@@ -44,25 +44,41 @@ pub fn distance_m(lat1: f64, lon1: f64, lat2: f64, lon2: f64) -> f64 {
 pub fn geodetic_to_ecef(lat: f64, lon: f64, h: f64) -> [f64; 3] {
     let (sp, cp) = lat.to_radians().sin_cos();
     let (sl, cl) = lon.to_radians().sin_cos();
+    ecef_from_sin_cos([sp, cp, sl, cl], h)
+}
+
+/// ECEF (m) of a height above the ellipsoid where latitude and longitude
+/// are given by their sines and cosines `[sin lat, cos lat, sin lon, cos lon]`
+/// (as [`ecef_height_fast`] returns them): no trigonometry.
+pub fn ecef_from_sin_cos([sp, cp, sl, cl]: [f64; 4], h: f64) -> [f64; 3] {
     let n = WGS84_A / (1.0 - WGS84_E2 * sp * sp).sqrt();
     [(n + h) * cp * cl, (n + h) * cp * sl, (n * (1.0 - WGS84_E2) + h) * sp]
 }
 
 /// ECEF (m) to geodetic (deg, deg, m), by Bowring's method with two refinements
 /// (sub-millimetre for anything between the Earth's centre region and orbit).
+/// The latitude is carried through the iterations as a direction (its sine
+/// and cosine up to a common factor), so they need square roots only: the
+/// angles' tangent, arctangent and sine/cosine were most of the cost of
+/// publishing a track and of starting a multilateration solve.
 pub fn ecef_to_geodetic(p: [f64; 3]) -> (f64, f64, f64) {
     let [x, y, z] = p;
     let lon = y.atan2(x);
     let r = x.hypot(y);
     let b = WGS84_A * (1.0 - WGS84_F);
     let ep2 = (WGS84_A * WGS84_A - b * b) / (b * b);
-    let mut lat = (z * WGS84_A).atan2(r * b);
+    let (mut num, mut den) = (z * WGS84_A, r * b);
     for _ in 0..3 {
-        let beta = ((1.0 - WGS84_F) * lat.tan()).atan();
-        let (sb, cb) = beta.sin_cos();
-        lat = (z + ep2 * b * sb.powi(3)).atan2(r - WGS84_E2 * WGS84_A * cb.powi(3));
+        // Parametric latitude: tan(beta) = (1 - f) tan(lat), |beta| <= 90 deg.
+        let (u, v) = if den < 0.0 { (-(1.0 - WGS84_F) * num, -den) } else { ((1.0 - WGS84_F) * num, den) };
+        let k = (u * u + v * v).sqrt();
+        let (sb, cb) = if k > 0.0 { (u / k, v / k) } else { (0.0, 1.0) };
+        num = z + ep2 * b * sb * sb * sb;
+        den = r - WGS84_E2 * WGS84_A * cb * cb * cb;
     }
-    let (sp, cp) = lat.sin_cos();
+    let lat = num.atan2(den);
+    let k = (num * num + den * den).sqrt();
+    let (sp, cp) = if k > 0.0 { (num / k, den / k) } else { (0.0, 1.0) };
     let n = WGS84_A / (1.0 - WGS84_E2 * sp * sp).sqrt();
     let h = if cp.abs() > 1e-10 { r / cp - n } else { z.abs() - b };
     (lat.to_degrees(), lon.to_degrees(), h)
@@ -103,9 +119,17 @@ mod tests {
 
     #[test]
     fn ecef_round_trip() {
-        for &(lat, lon, h) in
-            &[(0.0, 0.0, 0.0), (43.629, 1.3638, 152.0), (-89.9, 120.0, 11000.0), (59.7, 30.6, 10668.0)]
-        {
+        for &(lat, lon, h) in &[
+            (0.0, 0.0, 0.0),
+            (43.629, 1.3638, 152.0),
+            (-89.9, 120.0, 11000.0),
+            (59.7, 30.6, 10668.0),
+            (90.0, 0.0, 0.0),
+            (-90.0, 45.0, 1000.0),
+            (0.0, -179.0, -400.0),
+            (30.0, -170.0, 400_000.0),
+            (-45.0, 10.0, 20_200_000.0),
+        ] {
             let (la, lo, hh) = ecef_to_geodetic(geodetic_to_ecef(lat, lon, h));
             assert!(
                 (la - lat).abs() < 1e-9 && (lo - lon).abs() < 1e-9 && (hh - h).abs() < 1e-4,

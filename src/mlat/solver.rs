@@ -15,7 +15,7 @@
 
 use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
 
-use crate::geo::{ecef_height_fast, ecef_to_geodetic, geodetic_to_ecef};
+use crate::geo::{ecef_from_sin_cos, ecef_height_fast, ecef_to_geodetic};
 
 /// Speed of light in air (the simulator's and the solver's; refractive index 1.0003).
 pub const C_AIR: f64 = 299_792_458.0 / 1.0003;
@@ -248,9 +248,9 @@ pub fn solve(
             c += Vector3::from(m.pos);
         }
         c /= ms.len() as f64;
-        let (lat, lon, _) = ecef_to_geodetic([c[0], c[1], c[2]]);
+        let (_, sc) = ecef_height_fast([c[0], c[1], c[2]]);
         let h = alt.map_or(10_000.0, |a| a.h_m);
-        let p = Vector3::from(geodetic_to_ecef(lat, lon, h));
+        let p = Vector3::from(ecef_from_sin_cos(sc, h));
         starts[3] = Some(Vector4::new(p[0], p[1], p[2], b_for(p)));
     }
     let dof = n - 4;
@@ -491,6 +491,7 @@ fn refine(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geo::geodetic_to_ecef;
     use rand::Rng;
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
