@@ -9,7 +9,7 @@
 //! nothing flows back from the tracker, so the two stages can run on two
 //! threads and still produce exactly what one thread produces.
 
-use std::collections::HashMap;
+use crate::FastMap;
 
 use super::back::Cmd;
 use super::{CoreConfig, CoreStats, Event, PositionReport};
@@ -39,7 +39,7 @@ struct Watched {
 /// What `on_group` needs besides the group, borrowed apart from the grouper.
 struct GroupCtx<'a> {
     mlat: &'a mut Mlat,
-    watched: &'a mut HashMap<u32, Watched>,
+    watched: &'a mut FastMap<u32, Watched>,
     stats: &'a mut CoreStats,
     conformance: &'a ConformanceConfig,
     sync_inflation: f64,
@@ -53,7 +53,7 @@ pub struct Front {
     decoder: Decoder,
     grouper: Grouper,
     mlat: Mlat,
-    watched: HashMap<u32, Watched>,
+    watched: FastMap<u32, Watched>,
     conformance: ConformanceConfig,
     drop_after_s: f64,
     next_sweep: f64,
@@ -80,7 +80,7 @@ impl Front {
             decoder: Decoder::new(dcfg),
             grouper: Grouper::new(cfg.group_wait_s, cfg.max_pending_groups),
             mlat: Mlat::new(cfg.mlat.clone()),
-            watched: HashMap::new(),
+            watched: FastMap::default(),
             conformance: cfg.fuse.conformance.clone(),
             drop_after_s: cfg.track.drop_after_s,
             next_sweep: f64::NEG_INFINITY,

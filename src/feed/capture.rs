@@ -9,7 +9,7 @@
 //! skipped and counted; reading goes on. Frames reference receivers by index
 //! so the processing core never hashes strings on the hot path.
 
-use std::collections::HashMap;
+use crate::FastMap;
 use std::fmt;
 use std::io::{self, BufRead, Write};
 
@@ -136,7 +136,7 @@ pub struct CaptureReader<R> {
     line_no: usize,
     line: Vec<u8>,
     receivers: Vec<ReceiverDecl>,
-    ids: HashMap<Vec<u8>, usize>,
+    ids: FastMap<Vec<u8>, usize>,
     pub skipped: u64,
     pub errors: Vec<LineError>,
 }
@@ -152,7 +152,7 @@ impl<R: BufRead> CaptureReader<R> {
             line_no: 0,
             line: Vec::with_capacity(128),
             receivers: Vec::new(),
-            ids: HashMap::new(),
+            ids: FastMap::default(),
             skipped: 0,
             errors: Vec::new(),
         }
@@ -237,7 +237,7 @@ fn parse_receiver(text: &str) -> Result<CaptureRecord, String> {
 }
 
 /// `ARRIVAL ID <FRAME;`, on bytes: this is the hot path of `run --capture`.
-fn parse_frame_line(text: &[u8], ids: &HashMap<Vec<u8>, usize>) -> Result<CaptureRecord, String> {
+fn parse_frame_line(text: &[u8], ids: &FastMap<Vec<u8>, usize>) -> Result<CaptureRecord, String> {
     let mut words = text.split(|&b| b == b' ' || b == b'\t').filter(|w| !w.is_empty());
     let first = words.next().unwrap_or_default();
     let arrival: f64 = std::str::from_utf8(first)

@@ -15,7 +15,7 @@
 //! two aircraft can close within the longest tau, so the cost grows with
 //! traffic density, not with the square of the traffic.
 
-use std::collections::HashMap;
+use crate::FastMap;
 
 use serde::{Deserialize, Serialize};
 
@@ -141,7 +141,7 @@ pub fn find(cfg: &ConflictConfig, tracks: &[Kinematics]) -> Vec<Conflict> {
     // means a conflicting pair is in the same or a neighbouring cell.
     const CELL_M: f64 = 60_000.0;
     let key = |k: &Kinematics| ((k.pos[0] / CELL_M).floor() as i64, (k.pos[1] / CELL_M).floor() as i64);
-    let mut grid: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
+    let mut grid: FastMap<(i64, i64), Vec<usize>> = FastMap::default();
     for (i, k) in tracks.iter().enumerate() {
         grid.entry(key(k)).or_default().push(i);
     }

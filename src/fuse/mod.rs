@@ -22,7 +22,8 @@ pub mod conflict;
 pub mod conformance;
 pub mod methods;
 
-use std::collections::{HashMap, VecDeque};
+use crate::FastMap;
+use std::collections::VecDeque;
 use std::sync::Arc;
 
 use nalgebra::{Matrix2, Vector2};
@@ -197,13 +198,13 @@ pub struct Fuser {
     cfg: FuseConfig,
     tcfg: Arc<TrackConfig>,
     spec: Arc<ImmSpec>,
-    aircraft: HashMap<u32, Aircraft>,
+    aircraft: FastMap<u32, Aircraft>,
     /// (release time, addr) of each waiting measurement, in release order.
     held: VecDeque<(f64, u32)>,
     next_id: u64,
     next_sweep: f64,
     next_conflict: f64,
-    conflicts: HashMap<(u32, u32), conflict::Conflict>,
+    conflicts: FastMap<(u32, u32), conflict::Conflict>,
     pub publish_source_tracks: bool,
     /// Single-source tracks are kept (track-to-track fusion, or published).
     singles: bool,
@@ -218,12 +219,12 @@ impl Fuser {
             cfg,
             tcfg: Arc::new(tcfg),
             spec,
-            aircraft: HashMap::new(),
+            aircraft: FastMap::default(),
             held: VecDeque::new(),
             next_id: 1,
             next_sweep: f64::NEG_INFINITY,
             next_conflict: f64::NEG_INFINITY,
-            conflicts: HashMap::new(),
+            conflicts: FastMap::default(),
             singles,
             publish_source_tracks,
             stats: FuseStats::default(),
@@ -591,7 +592,7 @@ impl Fuser {
                     .collect()
             }
         };
-        let found: HashMap<(u32, u32), conflict::Conflict> = conflict::find(&self.cfg.conflict, &kin)
+        let found: FastMap<(u32, u32), conflict::Conflict> = conflict::find(&self.cfg.conflict, &kin)
             .into_iter()
             .map(|c| ((c.a.min(c.b), c.a.max(c.b)), c))
             .collect();
@@ -605,7 +606,7 @@ impl Fuser {
                 }
             }
         }
-        let id = |aircraft: &HashMap<u32, Aircraft>, addr: u32| aircraft.get(&addr).map_or(0, |a| a.id);
+        let id = |aircraft: &FastMap<u32, Aircraft>, addr: u32| aircraft.get(&addr).map_or(0, |a| a.id);
         let mut changes: Vec<(bool, conflict::Conflict)> = found
             .iter()
             .filter(|(k, _)| !self.conflicts.contains_key(k))

@@ -8,6 +8,7 @@
 //! nothing verified are only trusted when an over-determined fix is
 //! consistent (identical copies at geometrically consistent times).
 
+use crate::FastMap;
 use std::collections::HashMap;
 
 use serde::Deserialize;
@@ -215,7 +216,7 @@ pub struct Mlat {
     limits: SolverLimits,
     rxs: Vec<Rx>,
     pub sync: ClockSync,
-    aircraft: HashMap<u32, AcState>,
+    aircraft: FastMap<u32, AcState>,
     /// Nanoseconds since the Unix epoch of the GPS time base's zero.
     gps_epoch_ns: Option<i64>,
     pub stats: MlatStats,
@@ -279,7 +280,7 @@ impl Mlat {
             limits: SolverLimits::default(),
             rxs: Vec::new(),
             sync: ClockSync::new(pair),
-            aircraft: HashMap::new(),
+            aircraft: FastMap::default(),
             gps_epoch_ns: None,
             stats: MlatStats::default(),
             tdoa: None,

@@ -5,7 +5,8 @@
 //! transmission is decoded, the later ones join its group. Pending groups are
 //! bounded; what is dropped is counted.
 
-use std::collections::{HashMap, VecDeque};
+use crate::FastMap;
+use std::collections::VecDeque;
 
 use smallvec::{smallvec, SmallVec};
 
@@ -76,7 +77,7 @@ pub enum Added {
 pub struct Grouper {
     wait_s: f64,
     max_pending: usize,
-    pending: HashMap<u128, usize>,
+    pending: FastMap<u128, usize>,
     // Groups in first-arrival order; `base` is the sequence number of the front.
     queue: VecDeque<Group>,
     base: usize,
@@ -96,7 +97,7 @@ impl Grouper {
         Grouper {
             wait_s,
             max_pending,
-            pending: HashMap::new(),
+            pending: FastMap::default(),
             queue: VecDeque::new(),
             base: 0,
             stats: GroupStats::default(),

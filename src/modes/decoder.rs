@@ -11,7 +11,7 @@
 //!   published only once a second independent decode has confirmed it (the
 //!   reliability count), so a one-off decode is never presented as fact.
 
-use std::collections::HashMap;
+use crate::FastMap;
 
 use super::cpr::{self, CprFields};
 use super::crc::SingleBitTable;
@@ -159,7 +159,7 @@ const PURGE_EVERY_S: f64 = 60.0;
 
 pub struct Decoder {
     cfg: DecoderConfig,
-    aircraft: HashMap<u32, Aircraft>,
+    aircraft: FastMap<u32, Aircraft>,
     single_bit: SingleBitTable,
     stats: DecodeStats,
     newest_t: f64,
@@ -175,7 +175,7 @@ impl Decoder {
     pub fn new(cfg: DecoderConfig) -> Self {
         Decoder {
             cfg,
-            aircraft: HashMap::new(),
+            aircraft: FastMap::default(),
             single_bit: SingleBitTable::new(),
             stats: DecodeStats::default(),
             newest_t: f64::NEG_INFINITY,
