@@ -165,25 +165,26 @@ impl<R: BufRead> CaptureReader<R> {
     /// The next record; `Ok(None)` at the end; `Err` only for I/O errors.
     pub fn next_record(&mut self) -> io::Result<Option<CaptureRecord>> {
         loop {
-            self.line.clear();
-            if self.input.read_until(b'\n', &mut self.line)? == 0 {
+            // A line that lies whole in the reader's buffer is parsed there
+            // (copying each line out was 3% of `run --capture`); one that
+            // straddles the buffer's end is gathered in `line` first.
+            let buf = self.input.fill_buf()?;
+            if buf.is_empty() {
                 return Ok(None);
             }
-            self.line_no += 1;
-            let text = self.line.trim_ascii();
-            if text.is_empty() || text[0] == b'#' {
-                continue;
-            }
-            let parsed = if text.starts_with(b"receiver") {
-                match std::str::from_utf8(text) {
-                    Ok(t) => parse_receiver(t),
-                    Err(_) => Err("receiver line is not text".to_string()),
+            let (parsed, used) = match memchr::memchr(b'\n', buf) {
+                Some(n) => (parse_line(&buf[..n], &self.ids), n + 1),
+                None => {
+                    self.line.clear();
+                    self.input.read_until(b'\n', &mut self.line)?;
+                    (parse_line(&self.line, &self.ids), 0)
                 }
-            } else {
-                parse_frame_line(text, &self.ids)
             };
+            self.input.consume(used);
+            self.line_no += 1;
             match parsed {
-                Ok(CaptureRecord::Receiver(r)) => {
+                None => continue,
+                Some(Ok(CaptureRecord::Receiver(r))) => {
                     if self.ids.contains_key(r.id.as_bytes()) {
                         self.skip(format!("receiver {} declared twice", r.id));
                         continue;
@@ -192,8 +193,8 @@ impl<R: BufRead> CaptureReader<R> {
                     self.receivers.push(r.clone());
                     return Ok(Some(CaptureRecord::Receiver(r)));
                 }
-                Ok(rec) => return Ok(Some(rec)),
-                Err(reason) => self.skip(reason),
+                Some(Ok(rec)) => return Ok(Some(rec)),
+                Some(Err(reason)) => self.skip(reason),
             }
         }
     }
@@ -234,6 +235,22 @@ fn parse_receiver(text: &str) -> Result<CaptureRecord, String> {
         alt: alt.ok_or("receiver needs alt")?,
         clock: clock.ok_or("receiver needs clock")?,
     }))
+}
+
+/// One line (without its newline): `None` for blank lines and comments.
+fn parse_line(line: &[u8], ids: &FastMap<Vec<u8>, usize>) -> Option<Result<CaptureRecord, String>> {
+    let text = line.trim_ascii();
+    if text.is_empty() || text[0] == b'#' {
+        return None;
+    }
+    Some(if text.starts_with(b"receiver") {
+        match std::str::from_utf8(text) {
+            Ok(t) => parse_receiver(t),
+            Err(_) => Err("receiver line is not text".to_string()),
+        }
+    } else {
+        parse_frame_line(text, ids)
+    })
 }
 
 /// `ARRIVAL ID <FRAME;`, on bytes: this is the hot path of `run --capture`.
@@ -422,24 +439,31 @@ mod tests {
         text += "receiver rx1 lat=1 lon=2 alt=3 clock=gps\n";
         text += "receiver rx9 lat=91 lon=2 alt=3 clock=gps\n";
         text += "1581500002.5 rx1 <000000000000FF5D4840D61F3A2B;\n";
-        let mut r = CaptureReader::new(text.as_bytes(), "mem.txt");
-        let mut recs = Vec::new();
-        while let Some(x) = r.next_record().unwrap() {
-            recs.push(x);
+        // Lines whole in the reader's buffer and lines across its end (a
+        // buffer smaller than a line, or ending mid-line): the same records.
+        text += "1581500003.5 rx1 <000000000000FF5D4840D61F3A2B;"; // no final newline
+        for capacity in [1 << 16, 1, 7, 50, 64] {
+            let mut r =
+                CaptureReader::new(std::io::BufReader::with_capacity(capacity, text.as_bytes()), "mem.txt");
+            let mut recs = Vec::new();
+            while let Some(x) = r.next_record().unwrap() {
+                recs.push(x);
+            }
+            assert_eq!(recs.len(), 4, "buffer {capacity}");
+            assert_eq!(recs[0], CaptureRecord::Receiver(rx.clone()));
+            assert_eq!(
+                recs[1],
+                CaptureRecord::Frame(CaptureFrame { arrival: 1581500000.123456, rx: 0, frame: f })
+            );
+            assert!(matches!(recs[3], CaptureRecord::Frame(CaptureFrame { arrival: 1581500003.5, .. })));
+            assert_eq!(r.skipped, 5);
+            let reasons: Vec<String> = r.errors.iter().map(|e| e.to_string()).collect();
+            assert!(reasons[0].starts_with("mem.txt:5: undeclared receiver \"rx2\""), "{reasons:?}");
+            assert!(reasons[1].contains("expected an arrival time"));
+            assert!(reasons[2].contains("malformed frame"));
+            assert!(reasons[3].contains("declared twice"));
+            assert!(reasons[4].starts_with("mem.txt:9:") && reasons[4].contains("valid lat"), "{reasons:?}");
         }
-        assert_eq!(recs.len(), 3);
-        assert_eq!(recs[0], CaptureRecord::Receiver(rx));
-        assert_eq!(
-            recs[1],
-            CaptureRecord::Frame(CaptureFrame { arrival: 1581500000.123456, rx: 0, frame: f })
-        );
-        assert_eq!(r.skipped, 5);
-        let reasons: Vec<String> = r.errors.iter().map(|e| e.to_string()).collect();
-        assert!(reasons[0].starts_with("mem.txt:5: undeclared receiver \"rx2\""), "{reasons:?}");
-        assert!(reasons[1].contains("expected an arrival time"));
-        assert!(reasons[2].contains("malformed frame"));
-        assert!(reasons[3].contains("declared twice"));
-        assert!(reasons[4].contains("valid lat"));
     }
 
     #[test]
