@@ -16,9 +16,13 @@ use serde::Deserialize;
 use super::clock::PairParams;
 use super::group::Group;
 use super::solver::{solve, AltitudeConstraint, Measurement, Reject, SolverLimits, C_AIR};
-use super::sync::{ClockSync, LocalCopy};
+use super::sync::{ClockSync, GroupVec, LocalCopy};
 use crate::feed::capture::{ClockKind, ReceiverDecl};
 use crate::geo::{ecef_distance, geodetic_to_ecef, FT_TO_M};
+
+/// The receivers of one measurement (more than one when they stand too close
+/// to be separate sites).
+type Site = smallvec::SmallVec<[usize; 2]>;
 
 #[derive(Clone, Debug, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields, default)]
@@ -408,8 +412,8 @@ impl Mlat {
             return None;
         }
         // Usable copies: known receiver, timing, healthy, not next to another.
-        let mut copies: Vec<LocalCopy> = Vec::with_capacity(g.copies.len());
-        let mut arrivals = Vec::with_capacity(g.copies.len());
+        let mut copies: GroupVec<LocalCopy> = GroupVec::new();
+        let mut arrivals: GroupVec<f64> = GroupVec::new();
         for c in &g.copies {
             if c.rx >= self.rxs.len() {
                 self.stats.unknown_receiver += 1;
@@ -458,8 +462,8 @@ impl Mlat {
         // One measurement per site: receivers closer than the minimum
         // separation add no geometry, so their times are averaged (inverse
         // variance) into one measurement with a smaller sigma.
-        let mut ms: Vec<Measurement> = Vec::with_capacity(copies.len());
-        let mut sites: Vec<Vec<usize>> = Vec::with_capacity(copies.len());
+        let mut ms: GroupVec<Measurement> = GroupVec::new();
+        let mut sites: GroupVec<Site> = GroupVec::new();
         let (mut sync_var, mut all_var) = (0.0, 0.0);
         for (c, t) in copies.iter().zip(&times) {
             let Some((t, var)) = t else { continue };
@@ -478,7 +482,7 @@ impl Mlat {
                 }
                 None => {
                     ms.push(m);
-                    sites.push(vec![c.rx]);
+                    sites.push(smallvec::smallvec![c.rx]);
                 }
             }
         }
@@ -559,8 +563,8 @@ impl Mlat {
     /// must not cost the whole transmission).
     fn solve_robust(
         &mut self,
-        ms: &mut Vec<Measurement>,
-        sites: &mut Vec<Vec<usize>>,
+        ms: &mut GroupVec<Measurement>,
+        sites: &mut GroupVec<Site>,
         alt: Option<AltitudeConstraint>,
         guess: Option<[f64; 3]>,
     ) -> Result<super::solver::Fix, Reject> {
@@ -601,7 +605,7 @@ impl Mlat {
         ms: &[Measurement],
         alt: Option<AltitudeConstraint>,
         fix: &super::solver::Fix,
-        sites: &[Vec<usize>],
+        sites: &[Site],
     ) {
         let res = super::solver::residuals(ms, alt, fix);
         for (site, &(r, h)) in sites.iter().zip(&res) {

@@ -13,6 +13,11 @@ use super::clock::{PairFilter, PairParams, Update};
 use super::solver::C_AIR;
 use crate::feed::capture::ClockKind;
 
+/// Per-transmission working lists, on the stack for any usual group (a
+/// transmission is heard by a handful of receivers; a larger group spills
+/// to the heap): their allocations were a tenth of a group's cost.
+pub type GroupVec<T> = smallvec::SmallVec<[T; 16]>;
+
 /// One receiver's copy, in its own local seconds.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LocalCopy {
@@ -207,15 +212,15 @@ impl ClockSync {
     /// receiver when there is one). Returns, per copy index, the time in the
     /// root's clock and the accumulated variance of the conversion; copies
     /// the tree cannot reach are `None`. Also returns the root's copy index.
-    pub fn common_time(&self, copies: &[LocalCopy], now: f64) -> (Vec<Option<(f64, f64)>>, usize) {
+    pub fn common_time(&self, copies: &[LocalCopy], now: f64) -> (GroupVec<Option<(f64, f64)>>, usize) {
         let n = copies.len();
-        let mut out = vec![None; n];
+        let mut out: GroupVec<Option<(f64, f64)>> = smallvec::smallvec![None; n];
         if n == 0 {
             return (out, 0);
         }
         // Edge weights once per pair: offset and variance, or None when the
         // pair is not usable; the reverse edge is the same relation inverted.
-        let mut w = vec![None; n * n];
+        let mut w: smallvec::SmallVec<[Option<(f64, f64)>; 64]> = smallvec::smallvec![None; n * n];
         for a in 0..n {
             for b in a + 1..n {
                 if let Some((off, var)) = self.edge(copies[a].rx, copies[b].rx, copies[a].t, now) {
@@ -233,7 +238,7 @@ impl ClockSync {
             .expect("non-empty");
         // Prim's algorithm on variance, converting times as the tree grows.
         out[root] = Some((copies[root].t, 0.0));
-        let mut in_tree = vec![false; n];
+        let mut in_tree: GroupVec<bool> = smallvec::smallvec![false; n];
         in_tree[root] = true;
         loop {
             let mut best: Option<(usize, usize, f64, f64)> = None;
