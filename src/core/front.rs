@@ -218,6 +218,7 @@ impl Front {
             df: d.msg.df,
             addr: d.msg.addr,
             addr_known: d.trusted(),
+            gnss_baro_diff_ft: d.gnss_baro_diff_ft,
             ..Default::default()
         };
         match d.msg.body {
@@ -322,7 +323,7 @@ impl Front {
         }
         let baro_height = |alt_ft: i32| {
             let diff = d.gnss_baro_diff_ft;
-            let sigma = if diff.is_some() { 8.0 } else { baro_sigma_m };
+            let sigma = if diff.is_some() { crate::mlat::engine::GNSS_DIFF_SIGMA_M } else { baro_sigma_m };
             ((alt_ft + diff.unwrap_or(0)) as f64 * FT_TO_M, sigma * sigma)
         };
         match d.msg.body {

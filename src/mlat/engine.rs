@@ -20,6 +20,11 @@ use super::sync::{ClockSync, GroupVec, LocalCopy};
 use crate::feed::capture::{ClockKind, ReceiverDecl};
 use crate::geo::{ecef_distance, geodetic_to_ecef, FT_TO_M};
 
+/// 1-sigma (m) of a height from a barometric altitude and the aircraft's own
+/// GNSS-baro difference (both in 25 ft steps; the difference a few seconds
+/// old): as the tracker's vertical channel takes it.
+pub const GNSS_DIFF_SIGMA_M: f64 = 8.0;
+
 /// The receivers of one measurement (more than one when they stand too close
 /// to be separate sites).
 type Site = smallvec::SmallVec<[usize; 2]>;
@@ -203,7 +208,9 @@ impl Rx {
 
 #[derive(Clone, Copy, Default)]
 struct AcState {
-    alt_ft: Option<(i32, f64)>,
+    /// Latest barometric altitude (ft), when (s), and the GNSS-baro
+    /// difference known then (ft).
+    alt_ft: Option<(i32, f64, Option<i32>)>,
     last_fix: Option<([f64; 3], f64)>,
     /// Last time an ADS-B position of this aircraft was seen.
     last_adsb: Option<f64>,
@@ -308,9 +315,10 @@ impl Mlat {
         self.sync.add_receiver(d.clock);
     }
 
-    /// An altitude heard from an aircraft (any message), for later constraints.
-    pub fn note_altitude(&mut self, addr: u32, alt_ft: i32, now: f64) {
-        self.aircraft.entry(addr).or_default().alt_ft = Some((alt_ft, now));
+    /// An altitude heard from an aircraft (any message), for later
+    /// constraints, with the aircraft's GNSS-baro difference when known.
+    pub fn note_altitude(&mut self, addr: u32, alt_ft: i32, gnss_baro_diff_ft: Option<i32>, now: f64) {
+        self.aircraft.entry(addr).or_default().alt_ft = Some((alt_ft, now, gnss_baro_diff_ft));
     }
 
     /// One line of MLAT state: valid pairs, sync residual per receiver (ns),
@@ -444,7 +452,7 @@ impl Mlat {
             }
         }
         if let Some(a) = info.alt_baro_ft {
-            self.note_altitude(info.addr, a, now);
+            self.note_altitude(info.addr, a, info.gnss_baro_diff_ft, now);
         }
         if info.adsb_ecef.is_some() {
             self.aircraft.entry(info.addr).or_default().last_adsb = Some(now);
@@ -486,15 +494,20 @@ impl Mlat {
                 }
             }
         }
-        let alt = ac.alt_ft.and_then(|(ft, t)| {
+        let alt = ac.alt_ft.and_then(|(ft, t, diff)| {
             let age = (now - t).abs();
             (age <= self.cfg.max_alt_age_s).then(|| {
-                // 25 ft steps, the baro-to-geometric correction, and climb since.
+                // 25 ft steps, the baro-to-geometric correction, and climb
+                // since. The correction is the aircraft's own when its ADS-B
+                // reports one (GNSS minus baro, in 25 ft steps): taken as zero
+                // instead, an error the same for every fix of the flight
+                // (45 m on tma-busy) moved its fixes off the same way for
+                // minutes, which a track fed by them could not average away.
                 let quant = 25.0 * FT_TO_M / 12f64.sqrt();
+                let correction = if diff.is_some() { GNSS_DIFF_SIGMA_M } else { self.cfg.baro_sigma_m };
                 let sigma =
-                    (quant.powi(2) + self.cfg.baro_sigma_m.powi(2) + (age * self.cfg.alt_growth_mps).powi(2))
-                        .sqrt();
-                AltitudeConstraint { h_m: ft as f64 * FT_TO_M, sigma_m: sigma }
+                    (quant.powi(2) + correction.powi(2) + (age * self.cfg.alt_growth_mps).powi(2)).sqrt();
+                AltitudeConstraint { h_m: (ft + diff.unwrap_or(0)) as f64 * FT_TO_M, sigma_m: sigma }
             })
         });
         if ms.len() < 3 || (ms.len() < 4 && alt.is_none()) {
@@ -761,6 +774,28 @@ mod tests {
         assert!(crate::geo::distance_m(f.lat, f.lon, 48.75, 2.40) < 1.0, "{f:?}");
         assert!((f.t - 1_700_000_000.0).abs() < 1e-6, "emission time from GPS: {}", f.t);
         assert_eq!(f.receivers.len(), 5);
+    }
+
+    #[test]
+    fn the_aircraft_s_own_gnss_baro_difference_sets_the_altitude_constraint() {
+        // Flying 200 ft (61 m) above its barometric altitude, outside the
+        // receivers' polygon, four receivers and the altitude: taken as its
+        // barometric altitude, the height error moves the fix sideways.
+        let (lat, lon) = (49.10, 2.80);
+        let target = geodetic_to_ecef(lat, lon, (30_000 + 200) as f64 * FT_TO_M);
+        let miss = |diff: Option<i32>| {
+            let (mut m, rxs) = engine();
+            let t = 1_700_000_000.0;
+            let mut g = group(&rxs[..4], target, t);
+            g.info.gnss_baro_diff_ft = diff;
+            let f = m.on_group(&g, t + 0.2).expect("fix");
+            (crate::geo::distance_m(f.lat, f.lon, lat, lon), f.cov_en[0][0] + f.cov_en[1][1])
+        };
+        let (with, with_var) = miss(Some(200));
+        let (without, without_var) = miss(None);
+        assert!(with < 2.0, "{with} m off with the difference");
+        assert!(without > 100.0, "{without} m off without it");
+        assert!(with_var < without_var, "the known difference is the tighter constraint");
     }
 
     #[test]
