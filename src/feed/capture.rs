@@ -380,6 +380,8 @@ impl<W: Write> CaptureWriter<W> {
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+
     #[test]
     fn fast_decimals_are_the_standard_parser_s_doubles() {
         use rand::{Rng, SeedableRng};
@@ -412,8 +414,6 @@ mod tests {
         assert_eq!(w, [&b"1.5"[..], b"rx1", b"<00;"]);
         assert_eq!(super::words(b" \t ").count(), 0);
     }
-
-    use super::*;
 
     #[test]
     fn round_trip_and_bad_lines() {
