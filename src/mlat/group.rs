@@ -87,14 +87,6 @@ pub struct Grouper {
     stats: GroupStats,
 }
 
-fn key(frame: &RawFrame) -> u128 {
-    let b = frame.bytes();
-    let mut k = [0u8; 16];
-    k[..b.len()].copy_from_slice(b);
-    k[15] = b.len() as u8;
-    u128::from_le_bytes(k)
-}
-
 impl Grouper {
     pub fn new(wait_s: f64, max_pending: usize) -> Self {
         Grouper {
@@ -114,7 +106,7 @@ impl Grouper {
     pub fn add(&mut self, rx: usize, arrival: f64, frame: &RawFrame, done: &mut impl FnMut(Group)) -> Added {
         self.stats.copies += 1;
         let copy = Copy { rx, timestamp: frame.timestamp, arrival, signal: frame.signal };
-        let k = key(frame);
+        let k = frame.key();
         if let Some(&seq) = self.pending.get(&k) {
             let g = &mut self.queue[seq - self.base];
             match g.copies.iter().find(|c| c.rx == rx) {
@@ -169,7 +161,7 @@ impl Grouper {
 
     fn pop_front(&mut self, done: &mut impl FnMut(Group)) {
         if let Some(g) = self.queue.pop_front() {
-            let k = key(&g.frame);
+            let k = g.frame.key();
             // A later group with the same bytes may own the key now.
             if self.pending.get(&k) == Some(&self.base) {
                 self.pending.remove(&k);
