@@ -480,16 +480,23 @@ impl std::fmt::Display for Report {
 mod tests {
     use super::*;
 
-    #[test]
-    fn the_fused_track_is_compared_over_the_span_all_three_tracks_cover() {
-        let mut truth_text = String::new();
-        for k in 0..=200 {
-            truth_text += &format!(
-                "{{\"type\":\"truth\",\"hex\":\"ABC123\",\"t\":{},\"lat\":45.0,\"lon\":5.0,\"alt_m\":1000.0}}\n",
-                1000.0 + k as f64 * 0.1
+    /// Aircraft ABC123 at 45 N, 1,000 m, every 0.1 s from t = 1000 for
+    /// `steps`, its longitude from 5 E growing by `lon_step` a step.
+    fn truth(steps: usize, lon_step: f64) -> Truth {
+        let mut text = String::new();
+        for k in 0..=steps {
+            text += &format!(
+                "{{\"type\":\"truth\",\"hex\":\"ABC123\",\"t\":{},\"lat\":45.0,\"lon\":{},\"alt_m\":1000.0}}\n",
+                1000.0 + k as f64 * 0.1,
+                5.0 + k as f64 * lon_step
             );
         }
-        let truth = Truth::read(truth_text.as_bytes()).unwrap();
+        Truth::read(text.as_bytes()).unwrap()
+    }
+
+    #[test]
+    fn the_fused_track_is_compared_over_the_span_all_three_tracks_cover() {
+        let truth = truth(200, 0.0);
         let north = |m: f64| 45.0 + m / 111_131.7;
         let mut recs = String::new();
         let mut track = |source: &str, t: f64, off_m: f64| {
@@ -531,15 +538,7 @@ mod tests {
 
     #[test]
     fn errors_nees_and_continuity_against_a_known_offset() {
-        let mut truth_text = String::new();
-        for k in 0..=100 {
-            truth_text += &format!(
-                "{{\"type\":\"truth\",\"hex\":\"ABC123\",\"t\":{},\"lat\":45.0,\"lon\":{},\"alt_m\":1000.0}}\n",
-                1000.0 + k as f64 * 0.1,
-                5.0 + k as f64 * 1e-4
-            );
-        }
-        let truth = Truth::read(truth_text.as_bytes()).unwrap();
+        let truth = truth(100, 1e-4);
         // Records 100 m north of the truth, claiming a 100 m sigma: NEES = 1 each.
         let dlat = 100.0 / 111_131.7;
         let mut recs = String::new();
