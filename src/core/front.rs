@@ -18,6 +18,7 @@ use crate::feed::RawFrame;
 use crate::fuse::conformance::{ConformanceConfig, Monitor};
 use crate::geo::geodetic_to_ecef;
 use crate::geo::{FT_TO_M, KT_TO_MS};
+use crate::mlat::engine::baro_height;
 use crate::mlat::group::{Added, Group, GroupInfo, Grouper};
 use crate::mlat::Mlat;
 use crate::modes::nic::{nacp_epu_m, nucp_hpl_m};
@@ -322,9 +323,8 @@ impl Front {
             return;
         }
         let baro_height = |alt_ft: i32| {
-            let diff = d.gnss_baro_diff_ft;
-            let sigma = if diff.is_some() { crate::mlat::engine::GNSS_DIFF_SIGMA_M } else { baro_sigma_m };
-            ((alt_ft + diff.unwrap_or(0)) as f64 * FT_TO_M, sigma * sigma)
+            let (h, sigma) = baro_height(alt_ft, d.gnss_baro_diff_ft, baro_sigma_m);
+            (h, sigma * sigma)
         };
         match d.msg.body {
             Body::AirAir { alt_ft: Some(a), .. } | Body::Altitude { alt_ft: Some(a), .. } => {
@@ -393,11 +393,10 @@ impl Front {
             Es::AirbornePosition { alt_ft: Some(a), gnss: true, .. } => {
                 (Some(a as f64 * FT_TO_M), None, Some(15.0))
             }
-            Es::AirbornePosition { alt_ft: Some(a), gnss: false, .. } => (
-                Some((a + d.gnss_baro_diff_ft.unwrap_or(0)) as f64 * FT_TO_M),
-                Some(a),
-                Some(if d.gnss_baro_diff_ft.is_some() { 8.0 } else { self.baro_sigma_m }),
-            ),
+            Es::AirbornePosition { alt_ft: Some(a), gnss: false, .. } => {
+                let (h, sigma) = baro_height(a, d.gnss_baro_diff_ft, self.baro_sigma_m);
+                (Some(h), Some(a), Some(sigma))
+            }
             _ => (None, None, None),
         };
         // EPU is a 95% radius: per-axis sigma = EPU / 2.448. Version 0 reports

@@ -22,8 +22,17 @@ use crate::geo::{ecef_distance, geodetic_to_ecef, FT_TO_M};
 
 /// 1-sigma (m) of a height from a barometric altitude and the aircraft's own
 /// GNSS-baro difference (both in 25 ft steps; the difference a few seconds
-/// old): as the tracker's vertical channel takes it.
-pub const GNSS_DIFF_SIGMA_M: f64 = 8.0;
+/// old).
+const GNSS_DIFF_SIGMA_M: f64 = 8.0;
+
+/// Height above the ellipsoid (m) of a barometric altitude, and its 1-sigma
+/// (m): corrected by the aircraft's own GNSS-baro difference when it reports
+/// one, else taken as is with the configured `baro_sigma_m`. One rule for
+/// the MLAT solver's altitude constraint and the tracker's heights.
+pub fn baro_height(alt_ft: i32, gnss_baro_diff_ft: Option<i32>, baro_sigma_m: f64) -> (f64, f64) {
+    let sigma = if gnss_baro_diff_ft.is_some() { GNSS_DIFF_SIGMA_M } else { baro_sigma_m };
+    ((alt_ft + gnss_baro_diff_ft.unwrap_or(0)) as f64 * FT_TO_M, sigma)
+}
 
 /// The receivers of one measurement (more than one when they stand too close
 /// to be separate sites).
@@ -504,10 +513,10 @@ impl Mlat {
                 // (45 m on tma-busy) moved its fixes off the same way for
                 // minutes, which a track fed by them could not average away.
                 let quant = 25.0 * FT_TO_M / 12f64.sqrt();
-                let correction = if diff.is_some() { GNSS_DIFF_SIGMA_M } else { self.cfg.baro_sigma_m };
+                let (h_m, correction) = baro_height(ft, diff, self.cfg.baro_sigma_m);
                 let sigma =
                     (quant.powi(2) + correction.powi(2) + (age * self.cfg.alt_growth_mps).powi(2)).sqrt();
-                AltitudeConstraint { h_m: (ft + diff.unwrap_or(0)) as f64 * FT_TO_M, sigma_m: sigma }
+                AltitudeConstraint { h_m, sigma_m: sigma }
             })
         });
         if ms.len() < 3 || (ms.len() < 4 && alt.is_none()) {
