@@ -9,7 +9,7 @@
 //! flooding receiver cannot starve the others beyond its rate limit.
 
 use std::collections::HashMap;
-use std::net::{IpAddr, SocketAddr};
+use std::net::IpAddr;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{SyncSender, TrySendError};
 use std::sync::{Arc, RwLock};
@@ -17,7 +17,7 @@ use std::time::Duration;
 
 use rand::Rng;
 use socket2::{Domain, Protocol, Socket, Type};
-use tokio::io::AsyncReadExt;
+use tokio::io::{AsyncReadExt, Interest};
 use tokio::net::{TcpListener, TcpStream, UdpSocket};
 
 use super::config::{InputConfig, InputKind, ReceiverConfig};
@@ -200,6 +200,9 @@ async fn udp(input: &InputConfig, tx: &SyncSender<ToCore>, reg: &Registry) -> st
     s.set_reuse_address(true)?;
     s.bind(&input.address.into())?;
     s.set_nonblocking(true)?;
+    if let Err(e) = super::stamp::enable(&s) {
+        tracing::warn!(input = %input.address, "no kernel receive timestamps ({e}): arrival read from the clock");
+    }
     let sock = UdpSocket::from_std(s.into())?;
     let format = if input.format == "avr" { InputFormat::Avr } else { InputFormat::Beast };
     let fixed = input.receiver.as_deref().and_then(|id| reg.index_of(id));
@@ -215,8 +218,10 @@ async fn udp(input: &InputConfig, tx: &SyncSender<ToCore>, reg: &Registry) -> st
     let mut buf = vec![0u8; 65_536];
     let mut frames = Vec::new();
     loop {
-        let (n, peer): (usize, SocketAddr) = sock.recv_from(&mut buf).await?;
-        let arrival = unix_now();
+        let (n, peer, arrival) =
+            sock.async_io(Interest::READABLE, || super::stamp::recv(&sock, &mut buf)).await?;
+        // Datagrams come from an address; a socket type without one is not ours.
+        let Some(peer) = peer else { continue };
         let now_generation = reg.generation.load(Ordering::Relaxed);
         if now_generation != generation {
             senders.clear();

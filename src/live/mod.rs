@@ -16,6 +16,7 @@ pub mod config;
 pub mod inputs;
 pub mod outputs;
 pub mod replay;
+pub mod stamp;
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering;
