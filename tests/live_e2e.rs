@@ -450,3 +450,98 @@ fn sighup_moves_a_udp_receiver_to_its_new_source_address() {
     assert!(log[hup..].contains(refused), "old address still taken:\n{log}");
     assert_eq!(counted(), before + 7, "the new address's 7 and none of the old one's after the move");
 }
+
+/// A Beast TCP server input that runs out of file descriptors (receivers
+/// holding more connections open than the process may have) keeps its
+/// listener: once descriptors are free again, a receiver that connects is
+/// served. (An accept error used to end the input, refusing every receiver
+/// from then on.)
+#[test]
+fn a_beast_server_out_of_descriptors_keeps_accepting() {
+    let dir = std::env::temp_dir().join(format!("fuse1090-e2e-fds-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let port = free_port();
+    let cfg_path = dir.join("fds.toml");
+    std::fs::write(
+        &cfg_path,
+        format!(
+            "[service]\nstats_interval_s = 0.2\n\n[[receiver]]\nid = \"held\"\nlat = 45.0\nlon = 5.0\n\
+             alt_m = 100.0\nclock = \"beast12\"\nsource = \"127.0.4.1\"\n\n[[input]]\n\
+             kind = \"beast_tcp_server\"\naddress = \"127.0.0.1:{port}\"\n"
+        ),
+    )
+    .unwrap();
+    let log_path = dir.join("fds.log");
+    // A small descriptor limit for the daemon alone.
+    let mut daemon = Command::new("sh")
+        .args(["-c", "ulimit -n 48 && exec \"$0\" \"$@\""])
+        .arg(env!("CARGO_BIN_EXE_fuse1090"))
+        .args(["run", "--config"])
+        .arg(&cfg_path)
+        .env("RUST_LOG", "info")
+        .stderr(Stdio::from(std::fs::File::create(&log_path).unwrap()))
+        .stdout(Stdio::null())
+        .spawn()
+        .unwrap();
+    let log = || std::fs::read_to_string(&log_path).unwrap_or_default();
+    let connect = || -> Option<TcpStream> {
+        let s = socket2::Socket::new(socket2::Domain::IPV4, socket2::Type::STREAM, None).ok()?;
+        s.bind(&"127.0.4.1:0".parse::<std::net::SocketAddr>().unwrap().into()).ok()?;
+        s.connect_timeout(&std::net::SocketAddr::from(([127, 0, 0, 1], port)).into(), Duration::from_secs(2))
+            .ok()?;
+        Some(s.into())
+    };
+    let t0 = Instant::now();
+    let mut held = Vec::new();
+    while held.is_empty() {
+        assert!(t0.elapsed() < Duration::from_secs(10), "the daemon never listened:\n{}", log());
+        held.extend(connect());
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // Far more connections than the daemon has descriptors left: the
+    // kernel queues the rest, and the daemon's accepts fail.
+    held.extend((0..60).filter_map(|_| connect()));
+    let t0 = Instant::now();
+    while !log().contains("accept failed") {
+        assert!(
+            t0.elapsed() < Duration::from_secs(10),
+            "accept never failed; the test proves nothing:\n{}",
+            log()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    drop(held);
+    // Descriptors free again: a receiver connects and its frames count.
+    let mut frame = vec![0x1a, b'3', 0, 0, 0, 0, 0, 1, 0x80];
+    frame.extend_from_slice(&[
+        0x8d, 0x40, 0x62, 0x1d, 0x58, 0xc3, 0x82, 0xd6, 0x90, 0xc8, 0xac, 0x28, 0x63, 0xa7,
+    ]);
+    let counted = || -> u64 {
+        let log = log();
+        let last = log.lines().rev().find(|l| l.contains("stats: frames")).unwrap_or("");
+        last.split("held=").nth(1).and_then(|r| r.split('/').next()).and_then(|n| n.parse().ok()).unwrap_or(0)
+    };
+    let mut late = connect().expect("the listener is gone");
+    let t0 = Instant::now();
+    while counted() < 5 {
+        assert!(
+            t0.elapsed() < Duration::from_secs(10),
+            "the new receiver's frames never counted:\n{}",
+            log()
+        );
+        late.write_all(&frame).unwrap();
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    signal(&daemon, "TERM");
+    assert!(daemon.wait().unwrap().success());
+    let text = log();
+    assert!(!text.contains("input stopped"), "{text}");
+    let errors: u64 = text
+        .lines()
+        .rev()
+        .find_map(|l| l.split("socket errors ").nth(1))
+        .and_then(|r| r.split(',').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or(0);
+    assert!(errors > 0, "socket errors not counted:\n{text}");
+}

@@ -44,6 +44,9 @@ pub struct Registry {
     pub receivers: RwLock<Vec<(ReceiverConfig, Arc<RxCounters>)>>,
     pub unknown_senders: AtomicU64,
     pub queue_drops: AtomicU64,
+    /// Failed accepts and datagram reads (out of descriptors, say): the
+    /// input stays and tries again.
+    pub socket_errors: AtomicU64,
     /// Bumped whenever `receivers` changes (SIGHUP), so the inputs' caches
     /// of it know to refresh.
     pub generation: AtomicU64,
@@ -69,6 +72,21 @@ impl Registry {
 
     fn max_rate(&self, rx: usize) -> f64 {
         self.receivers.read().expect("registry")[rx].0.max_rate
+    }
+
+    /// Counts a failed accept or read, logs it (the first of each power of
+    /// two), and waits before the next try: an error that persists (no file
+    /// descriptors left while receivers hold connections open) must not
+    /// spin, and must not end the input either, or every receiver that
+    /// connects after it would be refused for good.
+    async fn socket_error(&self, input: &InputConfig, what: &str, e: std::io::Error, in_a_row: &mut u32) {
+        let n = self.socket_errors.fetch_add(1, Ordering::Relaxed) + 1;
+        if n.is_power_of_two() {
+            tracing::warn!(address = %input.address, errors = n, "{what} failed: {e}; trying again");
+        }
+        *in_a_row += 1;
+        let wait_ms = (10u64 << (*in_a_row).min(7)).min(1000);
+        tokio::time::sleep(Duration::from_millis(wait_ms)).await;
     }
 }
 
@@ -164,8 +182,16 @@ async fn tcp_client(input: &InputConfig, tx: &SyncSender<ToCore>, reg: &Registry
 async fn tcp_server(input: &InputConfig, tx: SyncSender<ToCore>, reg: Arc<Registry>) -> std::io::Result<()> {
     let listener = TcpListener::bind(input.address).await?;
     let fixed = input.receiver.as_deref().and_then(|id| reg.index_of(id));
+    let mut in_a_row = 0;
     loop {
-        let (sock, peer) = listener.accept().await?;
+        let (sock, peer) = match listener.accept().await {
+            Ok(a) => a,
+            Err(e) => {
+                reg.socket_error(input, "accept", e, &mut in_a_row).await;
+                continue;
+            }
+        };
+        in_a_row = 0;
         let Some(rx) = fixed.or_else(|| reg.by_source(peer.ip(), input)) else {
             let n = reg.unknown_senders.fetch_add(1, Ordering::Relaxed) + 1;
             if n.is_power_of_two() {
@@ -217,9 +243,17 @@ async fn udp(input: &InputConfig, tx: &SyncSender<ToCore>, reg: &Registry) -> st
     let mut generation = reg.generation.load(Ordering::Relaxed);
     let mut buf = vec![0u8; 65_536];
     let mut frames = Vec::new();
+    let mut in_a_row = 0;
     loop {
         let (n, peer, arrival) =
-            sock.async_io(Interest::READABLE, || super::stamp::recv(&sock, &mut buf)).await?;
+            match sock.async_io(Interest::READABLE, || super::stamp::recv(&sock, &mut buf)).await {
+                Ok(d) => d,
+                Err(e) => {
+                    reg.socket_error(input, "datagram read", e, &mut in_a_row).await;
+                    continue;
+                }
+            };
+        in_a_row = 0;
         // Datagrams come from an address; a socket type without one is not ours.
         let Some(peer) = peer else { continue };
         let now_generation = reg.generation.load(Ordering::Relaxed);

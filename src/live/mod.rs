@@ -350,7 +350,7 @@ fn stats_line(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outp
     let out_err: u64 = outputs.dests.iter().map(|d| d.errors).sum();
     tracing::info!(
         "stats: frames {} [{}], messages {}, aircraft {}, tracks {}, fixes {} ({:.1}/s), suspects {}, conflicts {}, \
-         unknown senders {}, queue drops {}, output errors {}, mlat {}",
+         unknown senders {}, socket errors {}, queue drops {}, output errors {}, mlat {}",
         s.frames,
         per_rx.join(" "),
         s.messages,
@@ -361,6 +361,7 @@ fn stats_line(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outp
         f.suspect_flags,
         f.conflicts,
         reg.unknown_senders.load(Ordering::Relaxed),
+        reg.socket_errors.load(Ordering::Relaxed),
         reg.queue_drops.load(Ordering::Relaxed),
         out_err,
         front.mlat_fixes,
@@ -375,6 +376,7 @@ fn metrics(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outputs
     metrics::counter!("fuse1090_mlat_fixes_total").absolute(s.fixes);
     metrics::gauge!("fuse1090_tracks").set(back.fuser().tracks() as f64);
     metrics::counter!("fuse1090_unknown_senders_total").absolute(reg.unknown_senders.load(Ordering::Relaxed));
+    metrics::counter!("fuse1090_socket_errors_total").absolute(reg.socket_errors.load(Ordering::Relaxed));
     metrics::counter!("fuse1090_queue_drops_total").absolute(reg.queue_drops.load(Ordering::Relaxed));
     for (r, c) in reg.receivers.read().expect("registry").iter() {
         let id = r.id.clone();
