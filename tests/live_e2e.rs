@@ -451,26 +451,28 @@ fn sighup_moves_a_udp_receiver_to_its_new_source_address() {
     assert_eq!(counted(), before + 7, "the new address's 7 and none of the old one's after the move");
 }
 
-/// A Beast TCP server input that runs out of file descriptors (receivers
-/// holding more connections open than the process may have) keeps its
+/// A Beast TCP server input that runs out of file descriptors (more
+/// receivers connected than the process may have descriptors) keeps its
 /// listener: once descriptors are free again, a receiver that connects is
 /// served. (An accept error used to end the input, refusing every receiver
-/// from then on.)
+/// from then on.) And a receiver is served on its newest connection only:
+/// connecting again closes the older one.
 #[test]
-fn a_beast_server_out_of_descriptors_keeps_accepting() {
+fn a_beast_server_survives_running_out_of_descriptors_and_keeps_one_connection_per_receiver() {
     let dir = std::env::temp_dir().join(format!("fuse1090-e2e-fds-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let port = free_port();
     let cfg_path = dir.join("fds.toml");
-    std::fs::write(
-        &cfg_path,
-        format!(
-            "[service]\nstats_interval_s = 0.2\n\n[[receiver]]\nid = \"held\"\nlat = 45.0\nlon = 5.0\n\
-             alt_m = 100.0\nclock = \"beast12\"\nsource = \"127.0.4.1\"\n\n[[input]]\n\
-             kind = \"beast_tcp_server\"\naddress = \"127.0.0.1:{port}\"\n"
-        ),
-    )
-    .unwrap();
+    let mut cfg = format!(
+        "[service]\nstats_interval_s = 0.2\n\n[[input]]\nkind = \"beast_tcp_server\"\naddress = \"127.0.0.1:{port}\"\n\n"
+    );
+    for i in 1..=60 {
+        cfg += &format!(
+            "[[receiver]]\nid = \"held{i}\"\nlat = 45.0\nlon = 5.0\nalt_m = 100.0\nclock = \"beast12\"\n\
+             source = \"127.0.4.{i}\"\n\n"
+        );
+    }
+    std::fs::write(&cfg_path, cfg).unwrap();
     let log_path = dir.join("fds.log");
     // A small descriptor limit for the daemon alone.
     let mut daemon = Command::new("sh")
@@ -484,23 +486,60 @@ fn a_beast_server_out_of_descriptors_keeps_accepting() {
         .spawn()
         .unwrap();
     let log = || std::fs::read_to_string(&log_path).unwrap_or_default();
-    let connect = || -> Option<TcpStream> {
+    let connect = |from: usize| -> Option<TcpStream> {
         let s = socket2::Socket::new(socket2::Domain::IPV4, socket2::Type::STREAM, None).ok()?;
-        s.bind(&"127.0.4.1:0".parse::<std::net::SocketAddr>().unwrap().into()).ok()?;
+        s.bind(&std::net::SocketAddr::from(([127, 0, 4, from as u8], 0)).into()).ok()?;
         s.connect_timeout(&std::net::SocketAddr::from(([127, 0, 0, 1], port)).into(), Duration::from_secs(2))
             .ok()?;
         Some(s.into())
     };
+    let mut frame = vec![0x1a, b'3', 0, 0, 0, 0, 0, 1, 0x80];
+    frame.extend_from_slice(&[
+        0x8d, 0x40, 0x62, 0x1d, 0x58, 0xc3, 0x82, 0xd6, 0x90, 0xc8, 0xac, 0x28, 0x63, 0xa7,
+    ]);
+    // A receiver's count in the newest stats line.
+    let counted = |id: &str| -> u64 {
+        let log = log();
+        let last = log.lines().rev().find(|l| l.contains("stats: frames")).unwrap_or("");
+        last.split([' ', '['])
+            .find_map(|w| w.strip_prefix(&format!("{id}=")))
+            .and_then(|r| r.split('/').next())
+            .and_then(|n| n.parse().ok())
+            .unwrap_or(0)
+    };
     let t0 = Instant::now();
-    let mut held = Vec::new();
-    while held.is_empty() {
+    let mut first = None;
+    while first.is_none() {
         assert!(t0.elapsed() < Duration::from_secs(10), "the daemon never listened:\n{}", log());
-        held.extend(connect());
+        first = connect(1);
         std::thread::sleep(Duration::from_millis(50));
     }
-    // Far more connections than the daemon has descriptors left: the
-    // kernel queues the rest, and the daemon's accepts fail.
-    held.extend((0..60).filter_map(|_| connect()));
+    // Connecting again closes the older connection; the newer one is served.
+    let mut older = first.unwrap();
+    older.write_all(&frame).unwrap();
+    let mut newer = connect(1).unwrap();
+    older.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    let mut byte = [0u8; 1];
+    match older.read(&mut byte) {
+        Ok(0) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => {}
+        other => panic!("the older connection stays open: {other:?}"),
+    }
+    let t0 = Instant::now();
+    while counted("held1") < 4 {
+        assert!(
+            t0.elapsed() < Duration::from_secs(10),
+            "the newer connection's frames never counted:\n{}",
+            log()
+        );
+        newer.write_all(&frame).unwrap();
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(log().contains("the receiver connected again"), "{}", log());
+    drop(newer);
+    // Far more receivers than the daemon has descriptors left: the kernel
+    // queues the rest, and the daemon's accepts fail.
+    let held: Vec<TcpStream> = (2..=60).filter_map(connect).collect();
     let t0 = Instant::now();
     while !log().contains("accept failed") {
         assert!(
@@ -512,21 +551,13 @@ fn a_beast_server_out_of_descriptors_keeps_accepting() {
     }
     drop(held);
     // Descriptors free again: a receiver connects and its frames count.
-    let mut frame = vec![0x1a, b'3', 0, 0, 0, 0, 0, 1, 0x80];
-    frame.extend_from_slice(&[
-        0x8d, 0x40, 0x62, 0x1d, 0x58, 0xc3, 0x82, 0xd6, 0x90, 0xc8, 0xac, 0x28, 0x63, 0xa7,
-    ]);
-    let counted = || -> u64 {
-        let log = log();
-        let last = log.lines().rev().find(|l| l.contains("stats: frames")).unwrap_or("");
-        last.split("held=").nth(1).and_then(|r| r.split('/').next()).and_then(|n| n.parse().ok()).unwrap_or(0)
-    };
-    let mut late = connect().expect("the listener is gone");
+    let mut late = connect(1).expect("the listener is gone");
+    let before = counted("held1");
     let t0 = Instant::now();
-    while counted() < 5 {
+    while counted("held1") < before + 5 {
         assert!(
             t0.elapsed() < Duration::from_secs(10),
-            "the new receiver's frames never counted:\n{}",
+            "the new connection's frames never counted:\n{}",
             log()
         );
         late.write_all(&frame).unwrap();
@@ -544,4 +575,5 @@ fn a_beast_server_out_of_descriptors_keeps_accepting() {
         .and_then(|n| n.parse().ok())
         .unwrap_or(0);
     assert!(errors > 0, "socket errors not counted:\n{text}");
+    let _ = std::fs::remove_dir_all(&dir);
 }

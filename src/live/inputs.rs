@@ -183,6 +183,12 @@ async fn tcp_server(input: &InputConfig, tx: SyncSender<ToCore>, reg: Arc<Regist
     let listener = TcpListener::bind(input.address).await?;
     let fixed = input.receiver.as_deref().and_then(|id| reg.index_of(id));
     let mut in_a_row = 0;
+    // Each receiver's newest connection, and how to close it: one
+    // connection per receiver, as mlat-server does. A receiver reconnects
+    // when it thinks its connection died; the old one may be half open for
+    // hours (a NAT that forgot it), holding a descriptor, and two live ones
+    // would interleave one device's timestamps twice. Bounded by the receivers.
+    let mut newest: HashMap<usize, Arc<tokio::sync::Notify>> = HashMap::new();
     loop {
         let (sock, peer) = match listener.accept().await {
             Ok(a) => a,
@@ -200,12 +206,21 @@ async fn tcp_server(input: &InputConfig, tx: SyncSender<ToCore>, reg: Arc<Regist
             drop(sock);
             continue;
         };
+        let stop = Arc::new(tokio::sync::Notify::new());
+        if let Some(older) = newest.insert(rx, stop.clone()) {
+            // A permit is stored if that task is not waiting yet; if it has
+            // ended, nobody reads it.
+            older.notify_one();
+        }
         let (tx, reg) = (tx.clone(), reg.clone());
         tokio::spawn(async move {
             let c = reg.counters(rx);
             c.connects.fetch_add(1, Ordering::Relaxed);
             tracing::info!(peer = %peer, receiver = rx, "receiver connected");
-            let r = stream(sock, &tx, &reg, rx).await;
+            let r = tokio::select! {
+                r = stream(sock, &tx, &reg, rx) => r,
+                _ = stop.notified() => Err(std::io::Error::other("closed: the receiver connected again")),
+            };
             c.disconnects.fetch_add(1, Ordering::Relaxed);
             tracing::warn!(peer = %peer, "receiver disconnected: {}", r.err().map_or("end of stream".into(), |e| e.to_string()));
         });
