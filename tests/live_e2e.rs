@@ -577,3 +577,63 @@ fn a_beast_server_survives_running_out_of_descriptors_and_keeps_one_connection_p
     assert!(errors > 0, "socket errors not counted:\n{text}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A receiver that goes silent without closing its connection (power cut,
+/// a NAT that forgot it) is dropped after the input's idle timeout and, for
+/// a TCP client input, connected to again.
+#[test]
+fn a_silent_receiver_is_reconnected_after_the_idle_timeout() {
+    let dir = std::env::temp_dir().join(format!("fuse1090-e2e-idle-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let cfg_path = dir.join("idle.toml");
+    std::fs::write(
+        &cfg_path,
+        format!(
+            "[service]\nstats_interval_s = 60.0\n\n[[receiver]]\nid = \"quiet\"\nlat = 45.0\nlon = 5.0\n\
+             alt_m = 100.0\nclock = \"beast12\"\n\n[[input]]\nkind = \"beast_tcp_client\"\n\
+             address = \"{}\"\nreceiver = \"quiet\"\nidle_timeout_s = 0.5\n",
+            listener.local_addr().unwrap()
+        ),
+    )
+    .unwrap();
+    let log_path = dir.join("idle.log");
+    let mut daemon = bin()
+        .args(["run", "--config"])
+        .arg(&cfg_path)
+        .env("RUST_LOG", "info")
+        .stderr(Stdio::from(std::fs::File::create(&log_path).unwrap()))
+        .stdout(Stdio::null())
+        .spawn()
+        .unwrap();
+    listener.set_nonblocking(false).unwrap();
+    let (mut first, _) = listener.accept().unwrap();
+    let mut frame = vec![0x1a, b'3', 0, 0, 0, 0, 0, 1, 0x80];
+    frame.extend_from_slice(&[
+        0x8d, 0x40, 0x62, 0x1d, 0x58, 0xc3, 0x82, 0xd6, 0x90, 0xc8, 0xac, 0x28, 0x63, 0xa7,
+    ]);
+    first.write_all(&frame).unwrap();
+    // Then silence, the connection left open: the daemon closes it...
+    let t0 = Instant::now();
+    first.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    let mut byte = [0u8; 1];
+    match first.read(&mut byte) {
+        Ok(0) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => {}
+        other => panic!("the silent connection stays open: {other:?}"),
+    }
+    let closed_after = t0.elapsed();
+    assert!(closed_after >= Duration::from_millis(400), "closed before the timeout: {closed_after:?}");
+    // ... and connects again.
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = tx.send(listener.accept().map(|(s, _)| s));
+    });
+    let second = rx.recv_timeout(Duration::from_secs(5)).expect("no reconnection after the idle timeout");
+    assert!(second.is_ok());
+    signal(&daemon, "TERM");
+    assert!(daemon.wait().unwrap().success());
+    let log = std::fs::read_to_string(&log_path).unwrap();
+    assert!(log.contains("nothing received for 0.5 s"), "{log}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

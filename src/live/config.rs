@@ -100,6 +100,18 @@ pub struct InputConfig {
     /// udp: "beast" or "avr".
     #[serde(default = "beast")]
     pub format: String,
+    /// TCP inputs: a connection that brings nothing for this long (s) is
+    /// closed (a client then reconnects); 0: never. A receiver always has
+    /// traffic, and readsb and dump1090 send a heartbeat on an idle Beast
+    /// port every 60 s; a connection silent for longer is a receiver gone
+    /// without a word (power cut, a NAT that forgot it), which TCP alone
+    /// would notice only when we write to it, and we never do.
+    #[serde(default = "idle_timeout")]
+    pub idle_timeout_s: f64,
+}
+
+fn idle_timeout() -> f64 {
+    120.0
 }
 
 impl InputConfig {
@@ -208,6 +220,9 @@ pub fn validate(
             if !known(id) {
                 errs.push(format!("{at}: receivers: {id:?} is not declared"));
             }
+        }
+        if !(input.idle_timeout_s >= 0.0 && input.idle_timeout_s.is_finite()) {
+            errs.push(format!("{at}: idle_timeout_s = {} must be zero or positive", input.idle_timeout_s));
         }
         if input.format != "beast" && input.format != "avr" {
             errs.push(format!("{at}: format = {:?}: beast or avr", input.format));

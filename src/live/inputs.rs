@@ -106,18 +106,36 @@ fn forward(tx: &SyncSender<ToCore>, reg: &Registry, c: &RxCounters, rx: usize, a
     }
 }
 
-/// Reads a Beast stream until it ends; returns why.
+/// Reads a Beast stream until it ends, or brings nothing for the input's
+/// `idle_timeout_s`; returns why.
 async fn stream(
     mut sock: TcpStream,
+    input: &InputConfig,
     tx: &SyncSender<ToCore>,
     reg: &Registry,
     rx: usize,
 ) -> std::io::Result<()> {
+    // Keepalive probes find a peer that is gone within about a minute even
+    // when the idle timeout is off.
+    let keepalive = socket2::TcpKeepalive::new()
+        .with_time(Duration::from_secs(30))
+        .with_interval(Duration::from_secs(10))
+        .with_retries(3);
+    let _ = socket2::SockRef::from(&sock).set_tcp_keepalive(&keepalive);
+    let idle = (input.idle_timeout_s > 0.0).then(|| Duration::from_secs_f64(input.idle_timeout_s));
     let c = reg.counters(rx);
     let mut parser = parser_for(InputFormat::Beast);
     let mut buf = vec![0u8; 64 * 1024];
     loop {
-        let n = sock.read(&mut buf).await?;
+        let n = match idle {
+            Some(idle) => tokio::time::timeout(idle, sock.read(&mut buf)).await.map_err(|_| {
+                std::io::Error::new(
+                    std::io::ErrorKind::TimedOut,
+                    format!("nothing received for {} s", input.idle_timeout_s),
+                )
+            })??,
+            None => sock.read(&mut buf).await?,
+        };
         if n == 0 {
             return Ok(());
         }
@@ -156,7 +174,7 @@ async fn tcp_client(input: &InputConfig, tx: &SyncSender<ToCore>, reg: &Registry
                 failures = 0;
                 c.connects.fetch_add(1, Ordering::Relaxed);
                 tracing::info!(receiver = id, address = %input.address, "connected");
-                let r = stream(sock, tx, reg, rx).await;
+                let r = stream(sock, input, tx, reg, rx).await;
                 c.disconnects.fetch_add(1, Ordering::Relaxed);
                 tracing::warn!(
                     receiver = id,
@@ -212,13 +230,13 @@ async fn tcp_server(input: &InputConfig, tx: SyncSender<ToCore>, reg: Arc<Regist
             // ended, nobody reads it.
             older.notify_one();
         }
-        let (tx, reg) = (tx.clone(), reg.clone());
+        let (tx, reg, input) = (tx.clone(), reg.clone(), input.clone());
         tokio::spawn(async move {
             let c = reg.counters(rx);
             c.connects.fetch_add(1, Ordering::Relaxed);
             tracing::info!(peer = %peer, receiver = rx, "receiver connected");
             let r = tokio::select! {
-                r = stream(sock, &tx, &reg, rx) => r,
+                r = stream(sock, &input, &tx, &reg, rx) => r,
                 _ = stop.notified() => Err(std::io::Error::other("closed: the receiver connected again")),
             };
             c.disconnects.fetch_add(1, Ordering::Relaxed);
