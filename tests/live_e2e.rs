@@ -35,6 +35,48 @@ fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_fuse1090"))
 }
 
+/// The daemon on `cfg`, logging at info level to `log` (and, with
+/// `max_fds`, under that descriptor limit).
+fn daemon(cfg: &Path, log: &Path, max_fds: Option<u32>) -> Child {
+    let mut cmd = match max_fds {
+        Some(n) => {
+            let mut c = Command::new("sh");
+            c.args(["-c", &format!("ulimit -n {n} && exec \"$0\" \"$@\"")])
+                .arg(env!("CARGO_BIN_EXE_fuse1090"));
+            c
+        }
+        None => bin(),
+    };
+    cmd.args(["run", "--config"])
+        .arg(cfg)
+        .env("RUST_LOG", "info")
+        .stderr(Stdio::from(std::fs::File::create(log).unwrap()))
+        .stdout(Stdio::null())
+        .spawn()
+        .unwrap()
+}
+
+/// One Beast Mode S long frame (a DF17 airborne position; the inputs count
+/// frames before any CRC check).
+fn beast_frame() -> Vec<u8> {
+    let mut frame = vec![0x1a, b'3', 0, 0, 0, 0, 0, 1, 0x80];
+    frame.extend_from_slice(&[
+        0x8d, 0x40, 0x62, 0x1d, 0x58, 0xc3, 0x82, 0xd6, 0x90, 0xc8, 0xac, 0x28, 0x63, 0xa7,
+    ]);
+    frame
+}
+
+/// Receiver `id`'s frame count in the newest stats line of a log.
+fn counted(log: &Path, id: &str) -> u64 {
+    let log = std::fs::read_to_string(log).unwrap_or_default();
+    let last = log.lines().rev().find(|l| l.contains("stats: frames")).unwrap_or("");
+    last.split([' ', '['])
+        .find_map(|w| w.strip_prefix(&format!("{id}=")))
+        .and_then(|r| r.split('/').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or(0)
+}
+
 fn signal(child: &Child, sig: &str) {
     assert!(Command::new("kill").args(["-s", sig, &child.id().to_string()]).status().unwrap().success());
 }
@@ -386,14 +428,7 @@ fn sighup_moves_a_udp_receiver_to_its_new_source_address() {
     let cfg_path = dir.join("hup.toml");
     std::fs::write(&cfg_path, cfg("127.0.3.1")).unwrap();
     let log_path = dir.join("hup.log");
-    let mut daemon = bin()
-        .args(["run", "--config"])
-        .arg(&cfg_path)
-        .env("RUST_LOG", "info")
-        .stderr(Stdio::from(std::fs::File::create(&log_path).unwrap()))
-        .stdout(Stdio::null())
-        .spawn()
-        .unwrap();
+    let mut daemon = daemon(&cfg_path, &log_path, None);
     // Polls the log: a loaded CI machine may take its time to start or re-read.
     let wait_for = |needle: &str| {
         let t0 = Instant::now();
@@ -403,12 +438,8 @@ fn sighup_moves_a_udp_receiver_to_its_new_source_address() {
         }
     };
     wait_for("running inputs=");
-    // One Beast Mode S long frame per datagram (the input counts frames
-    // before any CRC check).
-    let mut frame = vec![0x1a, b'3', 0, 0, 0, 0, 0, 1, 0x80];
-    frame.extend_from_slice(&[
-        0x8d, 0x40, 0x62, 0x1d, 0x58, 0xc3, 0x82, 0xd6, 0x90, 0xc8, 0xac, 0x28, 0x63, 0xa7,
-    ]);
+    // One frame per datagram.
+    let frame = beast_frame();
     let send = |from: &str, n: usize| {
         let s = UdpSocket::bind(format!("{from}:0")).unwrap();
         for _ in 0..n {
@@ -416,16 +447,7 @@ fn sighup_moves_a_udp_receiver_to_its_new_source_address() {
             std::thread::sleep(Duration::from_millis(2));
         }
     };
-    // The receiver's count in the newest stats line.
-    let counted = || -> u64 {
-        let log = std::fs::read_to_string(&log_path).unwrap_or_default();
-        let last = log.lines().rev().find(|l| l.contains("stats: frames")).unwrap_or("");
-        last.split("moved=")
-            .nth(1)
-            .and_then(|r| r.split('/').next())
-            .and_then(|n| n.parse().ok())
-            .unwrap_or(0)
-    };
+    let counted = || counted(&log_path, "moved");
     // "running" comes before the socket is bound: send until it counts.
     let t0 = Instant::now();
     while counted() == 0 {
@@ -475,16 +497,7 @@ fn a_beast_server_survives_running_out_of_descriptors_and_keeps_one_connection_p
     std::fs::write(&cfg_path, cfg).unwrap();
     let log_path = dir.join("fds.log");
     // A small descriptor limit for the daemon alone.
-    let mut daemon = Command::new("sh")
-        .args(["-c", "ulimit -n 48 && exec \"$0\" \"$@\""])
-        .arg(env!("CARGO_BIN_EXE_fuse1090"))
-        .args(["run", "--config"])
-        .arg(&cfg_path)
-        .env("RUST_LOG", "info")
-        .stderr(Stdio::from(std::fs::File::create(&log_path).unwrap()))
-        .stdout(Stdio::null())
-        .spawn()
-        .unwrap();
+    let mut daemon = daemon(&cfg_path, &log_path, Some(48));
     let log = || std::fs::read_to_string(&log_path).unwrap_or_default();
     let connect = |from: usize| -> Option<TcpStream> {
         let s = socket2::Socket::new(socket2::Domain::IPV4, socket2::Type::STREAM, None).ok()?;
@@ -493,20 +506,8 @@ fn a_beast_server_survives_running_out_of_descriptors_and_keeps_one_connection_p
             .ok()?;
         Some(s.into())
     };
-    let mut frame = vec![0x1a, b'3', 0, 0, 0, 0, 0, 1, 0x80];
-    frame.extend_from_slice(&[
-        0x8d, 0x40, 0x62, 0x1d, 0x58, 0xc3, 0x82, 0xd6, 0x90, 0xc8, 0xac, 0x28, 0x63, 0xa7,
-    ]);
-    // A receiver's count in the newest stats line.
-    let counted = |id: &str| -> u64 {
-        let log = log();
-        let last = log.lines().rev().find(|l| l.contains("stats: frames")).unwrap_or("");
-        last.split([' ', '['])
-            .find_map(|w| w.strip_prefix(&format!("{id}=")))
-            .and_then(|r| r.split('/').next())
-            .and_then(|n| n.parse().ok())
-            .unwrap_or(0)
-    };
+    let frame = beast_frame();
+    let counted = |id: &str| counted(&log_path, id);
     let t0 = Instant::now();
     let mut first = None;
     while first.is_none() {
@@ -598,21 +599,10 @@ fn a_silent_receiver_is_reconnected_after_the_idle_timeout() {
     )
     .unwrap();
     let log_path = dir.join("idle.log");
-    let mut daemon = bin()
-        .args(["run", "--config"])
-        .arg(&cfg_path)
-        .env("RUST_LOG", "info")
-        .stderr(Stdio::from(std::fs::File::create(&log_path).unwrap()))
-        .stdout(Stdio::null())
-        .spawn()
-        .unwrap();
+    let mut daemon = daemon(&cfg_path, &log_path, None);
     listener.set_nonblocking(false).unwrap();
     let (mut first, _) = listener.accept().unwrap();
-    let mut frame = vec![0x1a, b'3', 0, 0, 0, 0, 0, 1, 0x80];
-    frame.extend_from_slice(&[
-        0x8d, 0x40, 0x62, 0x1d, 0x58, 0xc3, 0x82, 0xd6, 0x90, 0xc8, 0xac, 0x28, 0x63, 0xa7,
-    ]);
-    first.write_all(&frame).unwrap();
+    first.write_all(&beast_frame()).unwrap();
     // Then silence, the connection left open: the daemon closes it...
     let t0 = Instant::now();
     first.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
