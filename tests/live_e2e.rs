@@ -77,6 +77,16 @@ fn counted(log: &Path, id: &str) -> u64 {
         .unwrap_or(0)
 }
 
+/// Waits up to 5 s for the daemon to close its end of `sock`.
+fn closed_by_the_daemon(sock: &mut TcpStream) -> Result<(), String> {
+    sock.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    match sock.read(&mut [0u8; 1]) {
+        Ok(0) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => Ok(()),
+        other => Err(format!("{other:?}")),
+    }
+}
+
 fn signal(child: &Child, sig: &str) {
     assert!(Command::new("kill").args(["-s", sig, &child.id().to_string()]).status().unwrap().success());
 }
@@ -508,6 +518,15 @@ fn a_beast_server_survives_running_out_of_descriptors_and_keeps_one_connection_p
     };
     let frame = beast_frame();
     let counted = |id: &str| counted(&log_path, id);
+    // Frames on a connection of receiver held1 until the stats count `n` of them.
+    let feed_until = |sock: &mut TcpStream, n: u64, what: &str| {
+        let t0 = Instant::now();
+        while counted("held1") < n {
+            assert!(t0.elapsed() < Duration::from_secs(10), "{what}:\n{}", log());
+            sock.write_all(&frame).unwrap();
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    };
     let t0 = Instant::now();
     let mut first = None;
     while first.is_none() {
@@ -519,23 +538,8 @@ fn a_beast_server_survives_running_out_of_descriptors_and_keeps_one_connection_p
     let mut older = first.unwrap();
     older.write_all(&frame).unwrap();
     let mut newer = connect(1).unwrap();
-    older.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
-    let mut byte = [0u8; 1];
-    match older.read(&mut byte) {
-        Ok(0) => {}
-        Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => {}
-        other => panic!("the older connection stays open: {other:?}"),
-    }
-    let t0 = Instant::now();
-    while counted("held1") < 4 {
-        assert!(
-            t0.elapsed() < Duration::from_secs(10),
-            "the newer connection's frames never counted:\n{}",
-            log()
-        );
-        newer.write_all(&frame).unwrap();
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    closed_by_the_daemon(&mut older).expect("the older connection stays open");
+    feed_until(&mut newer, 4, "the newer connection's frames never counted");
     assert!(log().contains("the receiver connected again"), "{}", log());
     drop(newer);
     // Far more receivers than the daemon has descriptors left: the kernel
@@ -553,17 +557,7 @@ fn a_beast_server_survives_running_out_of_descriptors_and_keeps_one_connection_p
     drop(held);
     // Descriptors free again: a receiver connects and its frames count.
     let mut late = connect(1).expect("the listener is gone");
-    let before = counted("held1");
-    let t0 = Instant::now();
-    while counted("held1") < before + 5 {
-        assert!(
-            t0.elapsed() < Duration::from_secs(10),
-            "the new connection's frames never counted:\n{}",
-            log()
-        );
-        late.write_all(&frame).unwrap();
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    feed_until(&mut late, counted("held1") + 5, "the new connection's frames never counted");
     signal(&daemon, "TERM");
     assert!(daemon.wait().unwrap().success());
     let text = log();
@@ -605,13 +599,7 @@ fn a_silent_receiver_is_reconnected_after_the_idle_timeout() {
     first.write_all(&beast_frame()).unwrap();
     // Then silence, the connection left open: the daemon closes it...
     let t0 = Instant::now();
-    first.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
-    let mut byte = [0u8; 1];
-    match first.read(&mut byte) {
-        Ok(0) => {}
-        Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => {}
-        other => panic!("the silent connection stays open: {other:?}"),
-    }
+    closed_by_the_daemon(&mut first).expect("the silent connection stays open");
     let closed_after = t0.elapsed();
     assert!(closed_after >= Duration::from_millis(400), "closed before the timeout: {closed_after:?}");
     // ... and connects again.
