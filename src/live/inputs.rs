@@ -1,7 +1,10 @@
 //! Input tasks: Beast TCP client (reconnecting with capped exponential
 //! backoff and jitter), Beast TCP server (senders identified by their
-//! configured source address, unknown ones refused and counted), and UDP
-//! datagrams of Beast or AVR (large receive buffer, per-receiver rate limit).
+//! configured source address, unknown ones refused and counted, one
+//! connection per receiver), and UDP datagrams of Beast or AVR (large
+//! receive buffer, kernel arrival stamps, per-receiver rate limit). A TCP
+//! connection silent for the input's idle timeout is closed; a failed
+//! accept or read is counted and retried, never the end of an input.
 //!
 //! Every task turns bytes into frames with the feed parsers and hands them
 //! to the core through a bounded queue without waiting: a full queue drops
@@ -287,7 +290,8 @@ async fn udp(input: &InputConfig, tx: &SyncSender<ToCore>, reg: &Registry) -> st
                 }
             };
         in_a_row = 0;
-        // Datagrams come from an address; a socket type without one is not ours.
+        // A UDP datagram always has a sender; one without could not be
+        // attributed to a receiver anyway.
         let Some(peer) = peer else { continue };
         let now_generation = reg.generation.load(Ordering::Relaxed);
         if now_generation != generation {
