@@ -7,19 +7,41 @@
 //! for the input task to be scheduled, which under load is milliseconds
 //! (the two cores are shared by the core's threads); the kernel's stamp
 //! is taken as the datagram reaches the socket. Where the option cannot
-//! be set or a datagram comes without a stamp, the clock is read instead.
+//! be set or a datagram comes without a stamp, the clock is read instead;
+//! so it is on systems other than Linux, which name the option differently.
 
 use std::io::IoSliceMut;
 use std::net::SocketAddr;
 use std::os::fd::{AsFd, AsRawFd};
 
-use nix::sys::socket::{recvmsg, setsockopt, sockopt, ControlMessageOwned, MsgFlags, SockaddrStorage};
+use nix::sys::socket::{recvmsg, ControlMessageOwned, MsgFlags, SockaddrStorage};
 
 use super::unix_now;
 
 /// Asks the kernel to stamp every datagram this socket receives.
+#[cfg(target_os = "linux")]
 pub fn enable<F: AsFd>(socket: &F) -> std::io::Result<()> {
-    setsockopt(socket, sockopt::ReceiveTimestampns, &true).map_err(std::io::Error::from)
+    nix::sys::socket::setsockopt(socket, nix::sys::socket::sockopt::ReceiveTimestampns, &true)
+        .map_err(std::io::Error::from)
+}
+
+#[cfg(not(target_os = "linux"))]
+pub fn enable<F: AsFd>(_socket: &F) -> std::io::Result<()> {
+    Err(std::io::Error::new(std::io::ErrorKind::Unsupported, "SO_TIMESTAMPNS is Linux's"))
+}
+
+/// The kernel's stamp in a control message, as Unix seconds.
+#[cfg(target_os = "linux")]
+fn stamp(c: ControlMessageOwned) -> Option<f64> {
+    match c {
+        ControlMessageOwned::ScmTimestampns(ts) => Some(ts.tv_sec() as f64 + ts.tv_nsec() as f64 * 1e-9),
+        _ => None,
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn stamp(_c: ControlMessageOwned) -> Option<f64> {
+    None
 }
 
 /// One datagram: its length, its sender and when it arrived (Unix
@@ -32,10 +54,7 @@ pub fn recv<F: AsRawFd>(socket: &F, buf: &mut [u8]) -> std::io::Result<(usize, O
         recvmsg::<SockaddrStorage>(socket.as_raw_fd(), &mut iov, Some(&mut control), MsgFlags::empty())?;
     // A truncated control buffer (not expected: it holds one stamp) loses
     // the stamp, not the datagram.
-    let arrival = msg.cmsgs().ok().into_iter().flatten().find_map(|c| match c {
-        ControlMessageOwned::ScmTimestampns(ts) => Some(ts.tv_sec() as f64 + ts.tv_nsec() as f64 * 1e-9),
-        _ => None,
-    });
+    let arrival = msg.cmsgs().ok().into_iter().flatten().find_map(stamp);
     let peer = msg.address.and_then(|a| {
         a.as_sockaddr_in()
             .map(|v4| SocketAddr::from(std::net::SocketAddrV4::from(*v4)))
@@ -50,6 +69,7 @@ mod tests {
     use std::net::UdpSocket;
     use std::time::Duration;
 
+    #[cfg(target_os = "linux")]
     #[test]
     fn a_datagram_is_stamped_when_it_arrived_not_when_it_was_read() {
         let rx = UdpSocket::bind("127.0.0.1:0").unwrap();
