@@ -55,6 +55,18 @@ pub fn ecef_from_sin_cos([sp, cp, sl, cl]: [f64; 4], h: f64) -> [f64; 3] {
     [(n + h) * cp * cl, (n + h) * cp * sl, (n * (1.0 - WGS84_E2) + h) * sp]
 }
 
+/// Sine and cosine of the angle of the direction `(u, v)` (`v` along the
+/// angle's zero); the zero angle for the zero vector.
+#[inline]
+fn unit(u: f64, v: f64) -> (f64, f64) {
+    let k = (u * u + v * v).sqrt();
+    if k > 0.0 {
+        (u / k, v / k)
+    } else {
+        (0.0, 1.0)
+    }
+}
+
 /// ECEF (m) to geodetic (deg, deg, m), by Bowring's method with two refinements
 /// (sub-millimetre for anything between the Earth's centre region and orbit).
 /// The latitude is carried through the iterations as a direction (its sine
@@ -71,14 +83,12 @@ pub fn ecef_to_geodetic(p: [f64; 3]) -> (f64, f64, f64) {
     for _ in 0..3 {
         // Parametric latitude: tan(beta) = (1 - f) tan(lat), |beta| <= 90 deg.
         let (u, v) = if den < 0.0 { (-(1.0 - WGS84_F) * num, -den) } else { ((1.0 - WGS84_F) * num, den) };
-        let k = (u * u + v * v).sqrt();
-        let (sb, cb) = if k > 0.0 { (u / k, v / k) } else { (0.0, 1.0) };
+        let (sb, cb) = unit(u, v);
         num = z + ep2 * b * sb * sb * sb;
         den = r - WGS84_E2 * WGS84_A * cb * cb * cb;
     }
     let lat = num.atan2(den);
-    let k = (num * num + den * den).sqrt();
-    let (sp, cp) = if k > 0.0 { (num / k, den / k) } else { (0.0, 1.0) };
+    let (sp, cp) = unit(num, den);
     let n = WGS84_A / (1.0 - WGS84_E2 * sp * sp).sqrt();
     let h = if cp.abs() > 1e-10 { r / cp - n } else { z.abs() - b };
     (lat.to_degrees(), lon.to_degrees(), h)

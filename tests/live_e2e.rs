@@ -246,15 +246,7 @@ fn daemon_end_to_end_over_loopback_with_faults() {
     let out = bin().arg("check-config").arg(&cfg_path).output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 
-    let log = std::fs::File::create(w.dir.join("daemon.log")).unwrap();
-    let mut daemon = bin()
-        .args(["run", "--config"])
-        .arg(&cfg_path)
-        .env("RUST_LOG", "info")
-        .stderr(Stdio::from(log))
-        .stdout(Stdio::null())
-        .spawn()
-        .unwrap();
+    let mut daemon = daemon(&cfg_path, &w.dir.join("daemon.log"), None);
     std::thread::sleep(Duration::from_millis(400));
 
     // Faults on the TCP server: an unknown sender, garbage and a half frame

@@ -322,13 +322,13 @@ impl Front {
             }
             return;
         }
-        let baro_height = |alt_ft: i32| {
+        let height_and_var = |alt_ft: i32| {
             let (h, sigma) = baro_height(alt_ft, d.gnss_baro_diff_ft, baro_sigma_m);
             (h, sigma * sigma)
         };
         match d.msg.body {
             Body::AirAir { alt_ft: Some(a), .. } | Body::Altitude { alt_ft: Some(a), .. } => {
-                let (h, var) = baro_height(a);
+                let (h, var) = height_and_var(a);
                 let m = Measurement { t: arrival, source: Source::Mlat, obs: Observation::Height { h, var } };
                 out.push(Cmd::Measure { addr, nac_p: None, m, now: arrival });
                 out.push(Cmd::AltBaro { addr, alt_ft: a });
