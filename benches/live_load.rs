@@ -17,6 +17,7 @@
 //! `FUSE1090_LOAD_SPEEDS=8,9` picks the speeds; `FUSE1090_LOAD_SECONDS=60`
 //! plays more of the world (20 s by default): at 8x and above a run's p99
 //! rests on one or two stalls, and a longer run weighs them fairly.
+//! `FUSE1090_LOAD_BIN=path/to/fuse1090` measures another build's daemon.
 
 use std::net::UdpSocket;
 use std::path::Path;
@@ -97,6 +98,10 @@ fn main() {
         .ok()
         .map(|v| v.split(',').filter_map(|x| x.trim().parse().ok()).collect())
         .unwrap_or_else(|| vec![1.0, 2.0, 4.0, 8.0]);
+    // FUSE1090_LOAD_BIN=path runs another build's daemon (A/B comparisons;
+    // the load generator stays this build's).
+    let daemon_bin =
+        std::env::var("FUSE1090_LOAD_BIN").unwrap_or_else(|_| env!("CARGO_BIN_EXE_fuse1090").into());
     for speed in speeds {
         let sub = UdpSocket::bind("127.0.0.1:0").unwrap();
         fuse1090::live::stamp::enable(&sub).unwrap();
@@ -119,7 +124,7 @@ fn main() {
         let cfg_path = dir.join("load.toml");
         std::fs::write(&cfg_path, cfg).unwrap();
         let log = std::fs::File::create(dir.join("daemon.log")).unwrap();
-        let mut daemon = Command::new(env!("CARGO_BIN_EXE_fuse1090"))
+        let mut daemon = Command::new(&daemon_bin)
             .args(["run", "--config"])
             .arg(&cfg_path)
             .env("RUST_LOG", "info")
