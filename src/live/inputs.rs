@@ -291,6 +291,9 @@ async fn tcp_server(input: &InputConfig, tx: SyncSender<ToCore>, reg: Arc<Regist
     }
 }
 
+/// Datagrams taken from the socket per system call, at most.
+const DATAGRAMS_PER_READ: usize = 32;
+
 /// Token bucket of one receiver (frames per second, one second of burst).
 struct Bucket {
     tokens: f64,
@@ -320,57 +323,61 @@ async fn udp(input: &InputConfig, tx: &SyncSender<ToCore>, reg: &Registry) -> st
     // the registry changes.
     let mut senders: HashMap<IpAddr, (usize, Arc<RxCounters>, f64)> = HashMap::new();
     let mut generation = reg.generation.load(Ordering::Relaxed);
-    let mut buf = vec![0u8; 65_536];
+    // Any datagram fits (65,507 bytes is UDP's most over IPv4).
+    let mut datagrams = super::stamp::Datagrams::new(DATAGRAMS_PER_READ, 65_536);
     let mut in_a_row = 0;
     loop {
-        let (n, peer, arrival) =
-            match sock.async_io(Interest::READABLE, || super::stamp::recv(&sock, &mut buf)).await {
-                Ok(d) => d,
-                Err(e) => {
-                    reg.socket_error(input, "datagram read", e, &mut in_a_row).await;
-                    continue;
-                }
-            };
+        let read = match sock.async_io(Interest::READABLE, || datagrams.recv(&sock)).await {
+            Ok(n) => n,
+            Err(e) => {
+                reg.socket_error(input, "datagram read", e, &mut in_a_row).await;
+                continue;
+            }
+        };
         in_a_row = 0;
-        // A UDP datagram always has a sender; one without could not be
-        // attributed to a receiver anyway.
-        let Some(peer) = peer else { continue };
         let now_generation = reg.generation.load(Ordering::Relaxed);
         if now_generation != generation {
             senders.clear();
             generation = now_generation;
         }
-        // A socket of one receiver takes any sender: keyed by that receiver,
-        // not by address, or a spray of source addresses would grow it.
-        let key = if fixed.is_some() { IpAddr::from([0, 0, 0, 0]) } else { peer.ip() };
-        let sender = match senders.get(&key) {
-            Some(s) => Some(s.clone()),
-            None => fixed.or_else(|| reg.by_source(peer.ip(), input)).map(|rx| {
-                let s = (rx, reg.counters(rx), reg.max_rate(rx));
-                senders.insert(key, s.clone());
-                s
-            }),
-        };
-        let Some((rx, c, rate)) = sender else {
-            let k = reg.unknown_senders.fetch_add(1, Ordering::Relaxed) + 1;
-            if k.is_power_of_two() {
-                tracing::warn!(peer = %peer, refused = k, "datagram from an unknown sender dropped");
+        for i in 0..read {
+            let (bytes, peer, arrival) = datagrams.get(i);
+            // A UDP datagram always has a sender; one without could not be
+            // attributed to a receiver anyway.
+            let Some(peer) = peer else { continue };
+            // A socket of one receiver takes any sender: keyed by that
+            // receiver, not by address, or a spray of source addresses
+            // would grow it.
+            let key = if fixed.is_some() { IpAddr::from([0, 0, 0, 0]) } else { peer.ip() };
+            let sender = match senders.get(&key) {
+                Some(s) => Some(s.clone()),
+                None => fixed.or_else(|| reg.by_source(peer.ip(), input)).map(|rx| {
+                    let s = (rx, reg.counters(rx), reg.max_rate(rx));
+                    senders.insert(key, s.clone());
+                    s
+                }),
+            };
+            let Some((rx, c, rate)) = sender else {
+                let k = reg.unknown_senders.fetch_add(1, Ordering::Relaxed) + 1;
+                if k.is_power_of_two() {
+                    tracing::warn!(peer = %peer, refused = k, "datagram from an unknown sender dropped");
+                }
+                continue;
+            };
+            c.bytes.fetch_add(bytes.len() as u64, Ordering::Relaxed);
+            let parser = parsers.entry(rx).or_insert_with(|| parser_for(format));
+            let mut frames = frames_of(parser.as_mut(), bytes, true, &c);
+            if rate > 0.0 {
+                let b = buckets.entry(rx).or_insert(Bucket { tokens: rate, at: arrival });
+                b.tokens = (b.tokens + (arrival - b.at) * rate).min(rate);
+                b.at = arrival;
+                let allowed = (b.tokens.max(0.0) as usize).min(frames.len());
+                b.tokens -= frames.len() as f64;
+                c.throttled.fetch_add((frames.len() - allowed) as u64, Ordering::Relaxed);
+                frames.truncate(allowed);
             }
-            continue;
-        };
-        c.bytes.fetch_add(n as u64, Ordering::Relaxed);
-        let parser = parsers.entry(rx).or_insert_with(|| parser_for(format));
-        let mut frames = frames_of(parser.as_mut(), &buf[..n], true, &c);
-        if rate > 0.0 {
-            let b = buckets.entry(rx).or_insert(Bucket { tokens: rate, at: arrival });
-            b.tokens = (b.tokens + (arrival - b.at) * rate).min(rate);
-            b.at = arrival;
-            let allowed = (b.tokens.max(0.0) as usize).min(frames.len());
-            b.tokens -= frames.len() as f64;
-            c.throttled.fetch_add((frames.len() - allowed) as u64, Ordering::Relaxed);
-            frames.truncate(allowed);
+            forward(tx, reg, &c, rx, arrival, frames);
         }
-        forward(tx, reg, &c, rx, arrival, frames);
     }
 }
 

@@ -44,6 +44,12 @@ fn stamp(_c: ControlMessageOwned) -> Option<f64> {
     None
 }
 
+fn socket_addr(a: &SockaddrStorage) -> Option<SocketAddr> {
+    a.as_sockaddr_in()
+        .map(|v4| SocketAddr::from(std::net::SocketAddrV4::from(*v4)))
+        .or_else(|| a.as_sockaddr_in6().map(|v6| SocketAddr::from(std::net::SocketAddrV6::from(*v6))))
+}
+
 /// One datagram: its length, its sender and when it arrived (Unix
 /// seconds: the kernel's stamp, else the clock now). Blocking or not as
 /// the socket is; `WouldBlock` and timeouts come back as errors.
@@ -55,12 +61,68 @@ pub fn recv<F: AsRawFd>(socket: &F, buf: &mut [u8]) -> std::io::Result<(usize, O
     // A truncated control buffer (not expected: it holds one stamp) loses
     // the stamp, not the datagram.
     let arrival = msg.cmsgs().ok().into_iter().flatten().find_map(stamp);
-    let peer = msg.address.and_then(|a| {
-        a.as_sockaddr_in()
-            .map(|v4| SocketAddr::from(std::net::SocketAddrV4::from(*v4)))
-            .or_else(|| a.as_sockaddr_in6().map(|v6| SocketAddr::from(std::net::SocketAddrV6::from(*v6))))
-    });
-    Ok((msg.bytes, peer, arrival.unwrap_or_else(unix_now)))
+    Ok((msg.bytes, msg.address.as_ref().and_then(socket_addr), arrival.unwrap_or_else(unix_now)))
+}
+
+/// Datagrams read several at a time (`recvmmsg` on Linux): under load
+/// many wait in the socket's buffer, and one system call (and one trip
+/// through the runtime's readiness) for each of them was most of the UDP
+/// input's own time at 1 M frames/s. Elsewhere one at a time.
+pub struct Datagrams {
+    bufs: Vec<Vec<u8>>,
+    /// Per datagram read: length, sender, arrival.
+    got: Vec<(usize, Option<SocketAddr>, f64)>,
+}
+
+impl Datagrams {
+    /// Up to `batch` datagrams of up to `size` bytes each per read.
+    pub fn new(batch: usize, size: usize) -> Datagrams {
+        let batch = if cfg!(target_os = "linux") { batch.max(1) } else { 1 };
+        Datagrams { bufs: vec![vec![0u8; size]; batch], got: Vec::with_capacity(batch) }
+    }
+
+    /// Reads what is waiting, up to the batch (at least one datagram, or
+    /// an error: `WouldBlock` when none is, the socket being non-blocking).
+    pub fn recv<F: AsRawFd>(&mut self, socket: &F) -> std::io::Result<usize> {
+        self.got.clear();
+        #[cfg(target_os = "linux")]
+        {
+            // Made for each read, not kept: its raw pointers make it not
+            // `Send`, which a spawned input task must be.
+            let mut headers = nix::sys::socket::MultiHeaders::<SockaddrStorage>::preallocate(
+                self.bufs.len(),
+                Some(nix::cmsg_space!(nix::sys::time::TimeSpec)),
+            );
+            let mut iovs: Vec<[IoSliceMut; 1]> = self.bufs.iter_mut().map(|b| [IoSliceMut::new(b)]).collect();
+            let msgs = nix::sys::socket::recvmmsg(
+                socket.as_raw_fd(),
+                &mut headers,
+                iovs.iter_mut(),
+                MsgFlags::MSG_DONTWAIT,
+                None,
+            )?;
+            for msg in msgs {
+                let arrival = msg.cmsgs().ok().into_iter().flatten().find_map(stamp);
+                self.got.push((
+                    msg.bytes,
+                    msg.address.as_ref().and_then(socket_addr),
+                    arrival.unwrap_or_else(unix_now),
+                ));
+            }
+        }
+        #[cfg(not(target_os = "linux"))]
+        {
+            let d = recv(socket, &mut self.bufs[0])?;
+            self.got.push(d);
+        }
+        Ok(self.got.len())
+    }
+
+    /// The `i`th datagram of the last read: bytes, sender, arrival.
+    pub fn get(&self, i: usize) -> (&[u8], Option<SocketAddr>, f64) {
+        let (n, peer, arrival) = self.got[i];
+        (&self.bufs[i][..n], peer, arrival)
+    }
 }
 
 #[cfg(test)]
@@ -111,5 +173,37 @@ mod tests {
         let (n, peer, arrival) = recv(&rx, &mut [0u8; 8]).unwrap();
         assert_eq!((n, peer), (1, Some(tx.local_addr().unwrap())));
         assert!(arrival >= before, "{arrival} {before}");
+    }
+
+    #[test]
+    fn several_datagrams_are_read_at_once_in_order_with_their_senders() {
+        let rx = UdpSocket::bind("127.0.0.1:0").unwrap();
+        let _ = enable(&rx);
+        rx.set_nonblocking(true).unwrap();
+        let (a, b) = (UdpSocket::bind("127.0.0.1:0").unwrap(), UdpSocket::bind("127.0.0.1:0").unwrap());
+        for (k, s) in [&a, &b, &a, &b, &a].into_iter().enumerate() {
+            s.send_to(&vec![k as u8; k + 1], rx.local_addr().unwrap()).unwrap();
+        }
+        std::thread::sleep(Duration::from_millis(50));
+        let mut d = Datagrams::new(4, 16);
+        let mut seen = Vec::new();
+        let (mut last, mut reads) = (0.0, Vec::new());
+        while let Ok(n) = d.recv(&rx) {
+            reads.push(n);
+            for i in 0..n {
+                let (bytes, peer, arrival) = d.get(i);
+                assert!(arrival >= last);
+                last = arrival;
+                seen.push((bytes.to_vec(), peer.unwrap()));
+            }
+        }
+        let (pa, pb) = (a.local_addr().unwrap(), b.local_addr().unwrap());
+        let want: Vec<(Vec<u8>, SocketAddr)> =
+            [pa, pb, pa, pb, pa].into_iter().enumerate().map(|(k, p)| (vec![k as u8; k + 1], p)).collect();
+        assert_eq!(seen, want);
+        // All five were waiting: one call took four of them.
+        assert_eq!(reads, if cfg!(target_os = "linux") { vec![4, 1] } else { vec![1; 5] });
+        // Nothing waiting: `WouldBlock`, not an empty read.
+        assert_eq!(d.recv(&rx).unwrap_err().kind(), std::io::ErrorKind::WouldBlock);
     }
 }
