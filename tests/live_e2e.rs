@@ -607,3 +607,48 @@ fn a_silent_receiver_is_reconnected_after_the_idle_timeout() {
     assert!(log.contains("nothing received for 0.5 s"), "{log}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The core's frame count in the newest stats line of a log.
+fn core_frames(log: &Path) -> u64 {
+    let log = std::fs::read_to_string(log).unwrap_or_default();
+    let last = log.lines().rev().find(|l| l.contains("stats: frames")).unwrap_or("");
+    last.split("stats: frames ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or(0)
+}
+
+/// A TCP read brings thousands of frames at once; the core takes them in
+/// batches of its own size (the rest waits for the next batch) and loses
+/// none of them.
+#[test]
+fn a_burst_of_frames_in_one_tcp_read_is_processed_whole() {
+    let dir = std::env::temp_dir().join(format!("fuse1090-e2e-burst-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let cfg_path = dir.join("burst.toml");
+    std::fs::write(
+        &cfg_path,
+        format!(
+            "[service]\nstats_interval_s = 0.2\n\n[[receiver]]\nid = \"busy\"\nlat = 45.0\nlon = 5.0\n\
+             alt_m = 100.0\nclock = \"beast12\"\n\n[[input]]\nkind = \"beast_tcp_client\"\n\
+             address = \"{}\"\nreceiver = \"busy\"\n",
+            listener.local_addr().unwrap()
+        ),
+    )
+    .unwrap();
+    let log_path = dir.join("burst.log");
+    let mut daemon = daemon(&cfg_path, &log_path, None);
+    let (mut sock, _) = listener.accept().unwrap();
+    let burst: Vec<u8> = (0..20_000).flat_map(|_| beast_frame()).collect();
+    sock.write_all(&burst).unwrap();
+    let t0 = Instant::now();
+    while core_frames(&log_path) < 20_000 && t0.elapsed() < Duration::from_secs(10) {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    signal(&daemon, "TERM");
+    assert!(daemon.wait().unwrap().success());
+    assert_eq!(core_frames(&log_path), 20_000, "{}", std::fs::read_to_string(&log_path).unwrap());
+    let _ = std::fs::remove_dir_all(&dir);
+}
