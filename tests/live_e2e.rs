@@ -619,21 +619,31 @@ fn core_frames(log: &Path) -> u64 {
         .unwrap_or(0)
 }
 
+/// The Prometheus endpoint's text (a plain HTTP/1.0 GET).
+fn scrape(addr: std::net::SocketAddr) -> String {
+    let Ok(mut s) = TcpStream::connect(addr) else { return String::new() };
+    let _ = s.write_all(b"GET /metrics HTTP/1.0\r\nHost: localhost\r\n\r\n");
+    let mut text = String::new();
+    let _ = s.read_to_string(&mut text);
+    text
+}
+
 /// A TCP read brings thousands of frames at once; the core takes them in
 /// batches of its own size (the rest waits for the next batch) and loses
-/// none of them.
+/// none of them; the stats line and the Prometheus endpoint say so.
 #[test]
 fn a_burst_of_frames_in_one_tcp_read_is_processed_whole() {
     let dir = std::env::temp_dir().join(format!("fuse1090-e2e-burst-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let metrics = TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap();
     let cfg_path = dir.join("burst.toml");
     std::fs::write(
         &cfg_path,
         format!(
-            "[service]\nstats_interval_s = 0.2\n\n[[receiver]]\nid = \"busy\"\nlat = 45.0\nlon = 5.0\n\
-             alt_m = 100.0\nclock = \"beast12\"\n\n[[input]]\nkind = \"beast_tcp_client\"\n\
-             address = \"{}\"\nreceiver = \"busy\"\n",
+            "[service]\nstats_interval_s = 0.2\nmetrics_listen = \"{metrics}\"\n\n[[receiver]]\nid = \"busy\"\n\
+             lat = 45.0\nlon = 5.0\nalt_m = 100.0\nclock = \"beast12\"\n\n[[input]]\n\
+             kind = \"beast_tcp_client\"\naddress = \"{}\"\nreceiver = \"busy\"\n",
             listener.local_addr().unwrap()
         ),
     )
@@ -646,6 +656,20 @@ fn a_burst_of_frames_in_one_tcp_read_is_processed_whole() {
     let t0 = Instant::now();
     while core_frames(&log_path) < 20_000 && t0.elapsed() < Duration::from_secs(10) {
         std::thread::sleep(Duration::from_millis(100));
+    }
+    // Metrics are refreshed once a second.
+    let mut text = String::new();
+    while !text.contains("fuse1090_frames_total 20000") && t0.elapsed() < Duration::from_secs(15) {
+        std::thread::sleep(Duration::from_millis(200));
+        text = scrape(metrics);
+    }
+    for want in [
+        "fuse1090_frames_total 20000",
+        "fuse1090_receiver_frames_total{receiver=\"busy\"} 20000",
+        "fuse1090_queue_frames 0",
+        "fuse1090_queue_drops_total 0",
+    ] {
+        assert!(text.lines().any(|l| l == want), "{want} not in:\n{text}");
     }
     signal(&daemon, "TERM");
     assert!(daemon.wait().unwrap().success());

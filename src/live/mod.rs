@@ -410,6 +410,8 @@ fn metrics(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outputs
     metrics::counter!("fuse1090_unknown_senders_total").absolute(reg.unknown_senders.load(Ordering::Relaxed));
     metrics::counter!("fuse1090_socket_errors_total").absolute(reg.socket_errors.load(Ordering::Relaxed));
     metrics::counter!("fuse1090_queue_drops_total").absolute(reg.queue_drops.load(Ordering::Relaxed));
+    // Frames waiting for the core: it fills before anything is dropped.
+    metrics::gauge!("fuse1090_queue_frames").set(reg.queued.load(Ordering::Relaxed) as f64);
     for (r, c) in reg.receivers.read().expect("registry").iter() {
         let id = r.id.clone();
         metrics::counter!("fuse1090_receiver_frames_total", "receiver" => id.clone())
