@@ -2,7 +2,8 @@
 //! backoff and jitter), Beast TCP server (senders identified by their
 //! configured source address, unknown ones refused and counted, one
 //! connection per receiver), and UDP datagrams of Beast or AVR (large
-//! receive buffer, kernel arrival stamps, per-receiver rate limit). A TCP
+//! receive buffer, several read per system call, per-receiver rate limit).
+//! Arrival times are the kernel's receive stamps, TCP's too. A TCP
 //! connection silent for the input's idle timeout is closed; a failed
 //! accept or read is counted and retried, never the end of an input.
 //!
@@ -21,11 +22,11 @@ use std::time::Duration;
 
 use rand::Rng;
 use socket2::{Domain, Protocol, Socket, Type};
-use tokio::io::{AsyncReadExt, Interest};
+use tokio::io::Interest;
 use tokio::net::{TcpListener, TcpStream, UdpSocket};
 
 use super::config::{InputConfig, InputKind, ReceiverConfig};
-use super::{unix_now, ToCore};
+use super::ToCore;
 use crate::feed::{parser_for, FeedEvent, FrameParser, InputFormat, RawFrame};
 
 /// Per-receiver counters, shared with the stats line and the metrics.
@@ -156,7 +157,7 @@ fn frames_of(parser: &mut dyn FrameParser, bytes: &[u8], datagram: bool, c: &RxC
 /// Reads a Beast stream until it ends, or brings nothing for the input's
 /// `idle_timeout_s`; returns why.
 async fn stream(
-    mut sock: TcpStream,
+    sock: TcpStream,
     input: &InputConfig,
     tx: &SyncSender<ToCore>,
     reg: &Registry,
@@ -169,24 +170,27 @@ async fn stream(
         .with_interval(Duration::from_secs(10))
         .with_retries(3);
     let _ = socket2::SockRef::from(&sock).set_tcp_keepalive(&keepalive);
+    // A read's arrival is when the kernel received its newest bytes, as for
+    // datagrams (see `stamp`); without the option, the clock after the read.
+    let _ = super::stamp::enable(&sock);
     let idle = (input.idle_timeout_s > 0.0).then(|| Duration::from_secs_f64(input.idle_timeout_s));
     let c = reg.counters(rx);
     let mut parser = parser_for(InputFormat::Beast);
     let mut buf = vec![0u8; 64 * 1024];
     loop {
-        let n = match idle {
-            Some(idle) => tokio::time::timeout(idle, sock.read(&mut buf)).await.map_err(|_| {
+        let read = sock.async_io(Interest::READABLE, || super::stamp::recv(&sock, &mut buf));
+        let (n, _, arrival) = match idle {
+            Some(idle) => tokio::time::timeout(idle, read).await.map_err(|_| {
                 std::io::Error::new(
                     std::io::ErrorKind::TimedOut,
                     format!("nothing received for {} s", input.idle_timeout_s),
                 )
             })??,
-            None => sock.read(&mut buf).await?,
+            None => read.await?,
         };
         if n == 0 {
             return Ok(());
         }
-        let arrival = unix_now();
         c.bytes.fetch_add(n as u64, Ordering::Relaxed);
         let frames = frames_of(parser.as_mut(), &buf[..n], false, &c);
         forward(tx, reg, &c, rx, arrival, frames);

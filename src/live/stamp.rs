@@ -1,4 +1,5 @@
-//! Datagrams with the time the kernel received them (`SO_TIMESTAMPNS`).
+//! Datagrams and TCP reads with the time the kernel received them
+//! (`SO_TIMESTAMPNS`; for a TCP read, that of its newest bytes).
 //!
 //! A frame's arrival time is a measurement: for receivers without GPS
 //! timing it is the time of applicability of their ADS-B positions, and
@@ -206,5 +207,32 @@ mod tests {
         assert_eq!(reads, if cfg!(target_os = "linux") { vec![4, 1] } else { vec![1; 5] });
         // Nothing waiting: `WouldBlock`, not an empty read.
         assert_eq!(d.recv(&rx).unwrap_err().kind(), std::io::ErrorKind::WouldBlock);
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_tcp_read_is_stamped_when_its_bytes_arrived() {
+        let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let mut tx = std::net::TcpStream::connect(l.local_addr().unwrap()).unwrap();
+        let (rx, _) = l.accept().unwrap();
+        enable(&rx).unwrap();
+        rx.set_read_timeout(Some(Duration::from_secs(2))).unwrap();
+        let mut tries = Vec::new();
+        for _ in 0..20 {
+            let sent = unix_now();
+            std::io::Write::write_all(&mut tx, b"frame").unwrap();
+            std::thread::sleep(Duration::from_millis(100));
+            let mut buf = [0u8; 64];
+            let (n, peer, arrival) = recv(&rx, &mut buf).unwrap();
+            let read = unix_now();
+            assert_eq!(&buf[..n], b"frame");
+            assert_eq!(peer, None);
+            assert!(arrival >= sent - 0.001 && arrival <= read, "{sent} {arrival} {read}");
+            if arrival < sent + 0.05 && read - arrival > 0.08 {
+                return;
+            }
+            tries.push(arrival - sent);
+        }
+        panic!("every read stamped at its read, not its arrival: {tries:?} s after sending");
     }
 }
