@@ -2,7 +2,8 @@
 //! backoff and jitter), Beast TCP server (senders identified by their
 //! configured source address, unknown ones refused and counted, one
 //! connection per receiver), and UDP datagrams of Beast or AVR (large
-//! receive buffer, several read per system call, per-receiver rate limit).
+//! receive buffer, several datagrams per system call, per-receiver rate
+//! limit).
 //! Arrival times are the kernel's receive stamps, TCP's too. A TCP
 //! connection silent for the input's idle timeout is closed; a failed
 //! accept or read is counted and retried, never the end of an input.
