@@ -236,29 +236,38 @@ impl ClockSync {
                 (gps as usize, degree, usize::MAX - a)
             })
             .expect("non-empty");
-        // Prim's algorithm on variance, converting times as the tree grows.
+        // Prim's algorithm on variance, converting times as the tree grows:
+        // each receiver outside the tree keeps its cheapest edge from it
+        // (O(n^2), where rescanning every pair of tree and non-tree for each
+        // addition was O(n^3)). Ties go to the lowest tree index, then the
+        // lowest receiver index.
         out[root] = Some((copies[root].t, 0.0));
         let mut in_tree: GroupVec<bool> = smallvec::smallvec![false; n];
-        in_tree[root] = true;
+        // (accumulated variance, tree end, offset) of each receiver's best edge.
+        let mut best: GroupVec<Option<(f64, usize, f64)>> = smallvec::smallvec![None; n];
+        let mut added = root;
         loop {
-            let mut best: Option<(usize, usize, f64, f64)> = None;
-            for a in (0..n).filter(|&a| in_tree[a]) {
-                for b in (0..n).filter(|&b| !in_tree[b]) {
-                    // Edge a -> b: t_b = t_a + offset; we need b's time in root clock.
-                    if let Some((off, var)) = w[a * n + b] {
-                        let acc = out[a].expect("in tree").1 + var;
-                        if best.is_none_or(|x| acc < x.3) {
-                            best = Some((a, b, off, acc));
-                        }
+            in_tree[added] = true;
+            let base = out[added].expect("in tree").1;
+            for b in (0..n).filter(|&b| !in_tree[b]) {
+                // Edge added -> b: t_b = t_added + offset.
+                if let Some((off, var)) = w[added * n + b] {
+                    let acc = base + var;
+                    if best[b].is_none_or(|(x, a, _)| acc < x || (acc == x && added < a)) {
+                        best[b] = Some((acc, added, off));
                     }
                 }
             }
-            let Some((a, b, off, acc)) = best else { break };
+            let next = (0..n)
+                .filter(|&b| !in_tree[b])
+                .filter_map(|b| best[b].map(|(acc, a, off)| (acc, a, b, off)))
+                .reduce(|x, y| if (y.0, y.1) < (x.0, x.1) { y } else { x });
+            let Some((acc, a, b, off)) = next else { break };
             // b's own time, moved into a's clock, then a's conversion to the root applies.
             let (ta_root, _) = out[a].expect("in tree");
             let tb_in_a = copies[b].t - off;
             out[b] = Some((ta_root + (tb_in_a - copies[a].t), acc));
-            in_tree[b] = true;
+            added = b;
         }
         (out, root)
     }
