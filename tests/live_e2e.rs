@@ -66,10 +66,23 @@ fn beast_frame() -> Vec<u8> {
     frame
 }
 
+/// The newest stats line of a log ("" before the first).
+fn newest_stats(log: &Path) -> String {
+    let log = std::fs::read_to_string(log).unwrap_or_default();
+    log.lines().rev().find(|l| l.contains("stats: frames")).unwrap_or("").to_string()
+}
+
+/// The number after `label` in the newest stats line of a log (0 if none).
+fn stats_number(log: &Path, label: &str) -> u64 {
+    let last = newest_stats(log);
+    let digits: String =
+        last.split(label).nth(1).unwrap_or("").chars().take_while(char::is_ascii_digit).collect();
+    digits.parse().unwrap_or(0)
+}
+
 /// Receiver `id`'s frame count in the newest stats line of a log.
 fn counted(log: &Path, id: &str) -> u64 {
-    let log = std::fs::read_to_string(log).unwrap_or_default();
-    let last = log.lines().rev().find(|l| l.contains("stats: frames")).unwrap_or("");
+    let last = newest_stats(log);
     last.split([' ', '['])
         .find_map(|w| w.strip_prefix(&format!("{id}=")))
         .and_then(|r| r.split('/').next())
@@ -554,14 +567,7 @@ fn a_beast_server_survives_running_out_of_descriptors_and_keeps_one_connection_p
     assert!(daemon.wait().unwrap().success());
     let text = log();
     assert!(!text.contains("input stopped"), "{text}");
-    let errors: u64 = text
-        .lines()
-        .rev()
-        .find_map(|l| l.split("socket errors ").nth(1))
-        .and_then(|r| r.split(',').next())
-        .and_then(|n| n.parse().ok())
-        .unwrap_or(0);
-    assert!(errors > 0, "socket errors not counted:\n{text}");
+    assert!(stats_number(&log_path, "socket errors ") > 0, "socket errors not counted:\n{text}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -608,17 +614,6 @@ fn a_silent_receiver_is_reconnected_after_the_idle_timeout() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// The core's frame count in the newest stats line of a log.
-fn core_frames(log: &Path) -> u64 {
-    let log = std::fs::read_to_string(log).unwrap_or_default();
-    let last = log.lines().rev().find(|l| l.contains("stats: frames")).unwrap_or("");
-    last.split("stats: frames ")
-        .nth(1)
-        .and_then(|r| r.split(' ').next())
-        .and_then(|n| n.parse().ok())
-        .unwrap_or(0)
-}
-
 /// The Prometheus endpoint's text (a plain HTTP/1.0 GET).
 fn scrape(addr: std::net::SocketAddr) -> String {
     let Ok(mut s) = TcpStream::connect(addr) else { return String::new() };
@@ -636,7 +631,7 @@ fn a_burst_of_frames_in_one_tcp_read_is_processed_whole() {
     let dir = std::env::temp_dir().join(format!("fuse1090-e2e-burst-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
-    let metrics = TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap();
+    let metrics = std::net::SocketAddr::from(([127, 0, 0, 1], free_port()));
     let cfg_path = dir.join("burst.toml");
     std::fs::write(
         &cfg_path,
@@ -654,7 +649,7 @@ fn a_burst_of_frames_in_one_tcp_read_is_processed_whole() {
     let burst: Vec<u8> = (0..20_000).flat_map(|_| beast_frame()).collect();
     sock.write_all(&burst).unwrap();
     let t0 = Instant::now();
-    while core_frames(&log_path) < 20_000 && t0.elapsed() < Duration::from_secs(10) {
+    while stats_number(&log_path, "stats: frames ") < 20_000 && t0.elapsed() < Duration::from_secs(10) {
         std::thread::sleep(Duration::from_millis(100));
     }
     // Metrics are refreshed once a second.
@@ -673,6 +668,11 @@ fn a_burst_of_frames_in_one_tcp_read_is_processed_whole() {
     }
     signal(&daemon, "TERM");
     assert!(daemon.wait().unwrap().success());
-    assert_eq!(core_frames(&log_path), 20_000, "{}", std::fs::read_to_string(&log_path).unwrap());
+    assert_eq!(
+        stats_number(&log_path, "stats: frames "),
+        20_000,
+        "{}",
+        std::fs::read_to_string(&log_path).unwrap()
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

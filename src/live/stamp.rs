@@ -15,7 +15,7 @@ use std::io::IoSliceMut;
 use std::net::SocketAddr;
 use std::os::fd::{AsFd, AsRawFd};
 
-use nix::sys::socket::{recvmsg, ControlMessageOwned, MsgFlags, SockaddrStorage};
+use nix::sys::socket::{recvmsg, ControlMessageOwned, MsgFlags, RecvMsg, SockaddrStorage};
 
 use super::unix_now;
 
@@ -51,18 +51,23 @@ fn socket_addr(a: &SockaddrStorage) -> Option<SocketAddr> {
         .or_else(|| a.as_sockaddr_in6().map(|v6| SocketAddr::from(std::net::SocketAddrV6::from(*v6))))
 }
 
-/// One datagram: its length, its sender and when it arrived (Unix
-/// seconds: the kernel's stamp, else the clock now). Blocking or not as
-/// the socket is; `WouldBlock` and timeouts come back as errors.
+/// What a received message says: its length, its sender and when it
+/// arrived (Unix seconds: the kernel's stamp, else the clock now). A
+/// truncated control buffer (not expected: it holds one stamp) loses the
+/// stamp, not the message.
+fn received(msg: &RecvMsg<'_, '_, SockaddrStorage>) -> (usize, Option<SocketAddr>, f64) {
+    let arrival = msg.cmsgs().ok().into_iter().flatten().find_map(stamp);
+    (msg.bytes, msg.address.as_ref().and_then(socket_addr), arrival.unwrap_or_else(unix_now))
+}
+
+/// One datagram (or TCP read): see [`received`]. Blocking or not as the
+/// socket is; `WouldBlock` and timeouts come back as errors.
 pub fn recv<F: AsRawFd>(socket: &F, buf: &mut [u8]) -> std::io::Result<(usize, Option<SocketAddr>, f64)> {
     let mut control = nix::cmsg_space!(nix::sys::time::TimeSpec);
     let mut iov = [IoSliceMut::new(buf)];
     let msg =
         recvmsg::<SockaddrStorage>(socket.as_raw_fd(), &mut iov, Some(&mut control), MsgFlags::empty())?;
-    // A truncated control buffer (not expected: it holds one stamp) loses
-    // the stamp, not the datagram.
-    let arrival = msg.cmsgs().ok().into_iter().flatten().find_map(stamp);
-    Ok((msg.bytes, msg.address.as_ref().and_then(socket_addr), arrival.unwrap_or_else(unix_now)))
+    Ok(received(&msg))
 }
 
 /// Datagrams read several at a time (`recvmmsg` on Linux), each with its
@@ -103,14 +108,7 @@ impl Datagrams {
                 MsgFlags::MSG_DONTWAIT,
                 None,
             )?;
-            for msg in msgs {
-                let arrival = msg.cmsgs().ok().into_iter().flatten().find_map(stamp);
-                self.got.push((
-                    msg.bytes,
-                    msg.address.as_ref().and_then(socket_addr),
-                    arrival.unwrap_or_else(unix_now),
-                ));
-            }
+            self.got.extend(msgs.map(|msg| received(&msg)));
         }
         #[cfg(not(target_os = "linux"))]
         {
