@@ -51,9 +51,9 @@ pub struct Registry {
     pub unknown_senders: AtomicU64,
     pub queue_drops: AtomicU64,
     /// Frames in the core's queue, and the most it may hold
-    /// (`queue_frames`).
+    /// (`queue_frames`, fixed at start).
     pub queued: AtomicUsize,
-    pub queue_frames: AtomicUsize,
+    pub queue_frames: usize,
     /// Failed accepts and datagram reads (out of descriptors, say): the
     /// input stays and tries again.
     pub socket_errors: AtomicU64,
@@ -120,7 +120,7 @@ fn forward(
     }
     c.frames.fetch_add(n as u64, Ordering::Relaxed);
     let before = reg.queued.fetch_add(n, Ordering::Relaxed);
-    let dropped = if before + n > reg.queue_frames.load(Ordering::Relaxed) {
+    let dropped = if before + n > reg.queue_frames {
         true
     } else {
         match tx.try_send(ToCore::Frames { rx, arrival, frames }) {
@@ -399,8 +399,7 @@ mod tests {
 
     #[test]
     fn the_queue_is_bounded_in_frames_and_a_batch_that_does_not_fit_is_counted_whole() {
-        let reg = Registry::default();
-        reg.queue_frames.store(10, Ordering::Relaxed);
+        let reg = Registry { queue_frames: 10, ..Default::default() };
         let c = RxCounters::default();
         // Room for many messages: the bound that bites is the frames'.
         let (tx, rx) = sync_channel(100);
@@ -421,8 +420,7 @@ mod tests {
         assert_eq!(got, vec![(3, 1.0, 6), (3, 3.0, 4)]);
         // A full channel drops too, and gives the frames' room back.
         let (tx, _rx) = sync_channel(1);
-        let reg = Registry::default();
-        reg.queue_frames.store(100, Ordering::Relaxed);
+        let reg = Registry { queue_frames: 100, ..Default::default() };
         forward(&tx, &reg, &c, 0, 4.0, frames(2));
         forward(&tx, &reg, &c, 0, 5.0, frames(3));
         assert_eq!(reg.queued.load(Ordering::Relaxed), 2);

@@ -76,8 +76,7 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
             .context("cannot start the Prometheus endpoint")?;
         tracing::info!(address = %addr, "Prometheus metrics");
     }
-    let registry = Arc::new(Registry::default());
-    registry.queue_frames.store(cfg.service.queue_frames, Ordering::Relaxed);
+    let registry = Arc::new(Registry { queue_frames: cfg.service.queue_frames, ..Default::default() });
     // Every message holds a frame or more: the frames' bound bites first.
     let (tx, rx) = sync_channel::<ToCore>(cfg.service.queue_frames);
     let mut core_cfg = cfg.core.clone();
