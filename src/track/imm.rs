@@ -87,9 +87,7 @@ impl Imm {
         for (j, ((cj, model), out)) in c.iter().zip(&self.spec.models).zip(predicted.iter_mut()).enumerate() {
             let w: PerModel<f64> = (0..n).map(|i| tr[(i, j)] * self.mu[i] / cj.max(1e-300)).collect();
             let mixed = combine(&self.filters, &w);
-            let (f, q) = model.transition_at(dt, &mixed.x);
-            out.x = f * mixed.x;
-            out.p = f * mixed.p * f.transpose() + q;
+            (out.x, out.p) = model.predict(dt, &mixed.x, &mixed.p);
         }
         // Every caller needs it (gate, NIS, linearisation): computed once.
         let combined = combine(&predicted, &c);

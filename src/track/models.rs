@@ -69,26 +69,35 @@ impl MotionModel {
     /// Transition and noise over `t` from state `x` (only the current
     /// statistical model looks at it).
     pub fn transition_at(&self, t: f64, x: &Vector6<f64>) -> (Matrix6<f64>, Matrix6<f64>) {
-        match *self {
-            MotionModel::CurrentStatistical { alpha, a_max } => {
-                let unit = singer_noise(alpha, 1.0, t);
-                let (qe, qn) = (rayleigh_variance(a_max, x[4]), rayleigh_variance(a_max, x[5]));
-                (per_axis(&ca_transition(t)), two_axes(&(unit * qe), &(unit * qn)))
-            }
-            _ => self.transition(t),
-        }
+        let (f, q) = self.transition_parts(t, x);
+        (f.dense(), q)
     }
 
     /// Transition and noise over `t`; the current statistical model at zero acceleration.
     pub fn transition(&self, t: f64) -> (Matrix6<f64>, Matrix6<f64>) {
+        self.transition_at(t, &Vector6::zeros())
+    }
+
+    /// The prediction of `(x, p)` over `t`: `(F x, F p F' + Q)`, bit for
+    /// bit the dense products' numbers at a fraction of their work (it was
+    /// a fifth of the tracker's instructions).
+    pub fn predict(&self, t: f64, x: &Vector6<f64>, p: &Matrix6<f64>) -> (Vector6<f64>, Matrix6<f64>) {
+        let (f, q) = self.transition_parts(t, x);
+        (f.apply(x), f.sandwich(p) + q)
+    }
+
+    fn transition_parts(&self, t: f64, x: &Vector6<f64>) -> (Transition, Matrix6<f64>) {
         match *self {
-            MotionModel::CurrentStatistical { .. } => self.transition_at(t, &Vector6::zeros()),
+            MotionModel::CurrentStatistical { alpha, a_max } => {
+                let unit = singer_noise(alpha, 1.0, t);
+                let (qe, qn) = (rayleigh_variance(a_max, x[4]), rayleigh_variance(a_max, x[5]));
+                (Transition::PerAxis(ca_transition(t)), two_axes(&(unit * qe), &(unit * qn)))
+            }
             MotionModel::ConstantVelocity { q } => {
                 let f = Matrix3::new(1.0, t, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0);
-                (per_axis(&f), per_axis(&cv_noise(q, t)))
+                (Transition::PerAxis(f), per_axis(&cv_noise(q, t)))
             }
             MotionModel::ConstantAcceleration { q } => {
-                let f = ca_transition(t);
                 let qq = Matrix3::new(
                     t.powi(5) / 20.0,
                     t.powi(4) / 8.0,
@@ -100,7 +109,7 @@ impl MotionModel {
                     t * t / 2.0,
                     t,
                 ) * q;
-                (per_axis(&f), per_axis(&qq))
+                (Transition::PerAxis(ca_transition(t)), per_axis(&qq))
             }
             MotionModel::CoordinatedTurn { omega, q } => {
                 // Heading increases clockwise: velocity rotates by -omega in
@@ -108,23 +117,10 @@ impl MotionModel {
                 let w = -omega;
                 let (s, c) = (w * t).sin_cos();
                 let (a, b) = if w.abs() < 1e-9 { (t, 0.0) } else { (s / w, (1.0 - c) / w) };
-                let mut f = Matrix6::zeros();
-                // State order: e, n, ve, vn, ae, an.
-                f[(0, 0)] = 1.0;
-                f[(0, 2)] = a;
-                f[(0, 3)] = -b;
-                f[(1, 1)] = 1.0;
-                f[(1, 2)] = b;
-                f[(1, 3)] = a;
-                f[(2, 2)] = c;
-                f[(2, 3)] = -s;
-                f[(3, 2)] = s;
-                f[(3, 3)] = c;
-                // Centripetal acceleration of the new velocity: a = w x v.
-                f[(4, 2)] = -w * s;
-                f[(4, 3)] = -w * c;
-                f[(5, 2)] = w * c;
-                f[(5, 3)] = -w * s;
+                // State order: e, n, ve, vn, ae, an; the acceleration rows
+                // are the centripetal one of the new velocity, a = w x v.
+                let f =
+                    Transition::Turn { h: [a, b, c, s, -w * s, w * c], m: [-b, a, -s, c, -w * c, -w * s] };
                 (f, per_axis(&cv_noise(q, t)))
             }
             MotionModel::Singer { alpha, sigma_a } => {
@@ -140,9 +136,115 @@ impl MotionModel {
                     0.0,
                     e,
                 );
-                (per_axis(&f), per_axis(&singer_noise(alpha, sigma_a, t)))
+                (Transition::PerAxis(f), per_axis(&singer_noise(alpha, sigma_a, t)))
             }
         }
+    }
+}
+
+/// A model's transition matrix by its structure: every per-axis model's is
+/// the same upper-triangular block for east and north, a turn's rows each
+/// have their own position (the first two) and the two velocities.
+///
+/// Products by it are the dense products' numbers exactly, at a third of
+/// their work: a dense product sums its terms in column order, and the
+/// terms it has beyond these are products with zero, which add nothing to
+/// a non-zero sum. A row of zeros (constant velocity's accelerations) gives
+/// the dense sum of signed zeros in the mean; in the covariance `Q`, whose
+/// zeros are all positive, is added after, which makes any zero positive
+/// either way.
+#[derive(Clone, Copy, Debug)]
+enum Transition {
+    PerAxis(Matrix3<f64>),
+    /// Row `i` is `[i < 2] x_i + h_i ve + m_i vn`.
+    Turn {
+        h: [f64; 6],
+        m: [f64; 6],
+    },
+}
+
+impl Transition {
+    fn dense(&self) -> Matrix6<f64> {
+        match self {
+            Transition::PerAxis(f) => per_axis(f),
+            Transition::Turn { h, m } => Matrix6::from_fn(|i, j| match j {
+                2 => h[i],
+                3 => m[i],
+                _ if j == i && i < 2 => 1.0,
+                _ => 0.0,
+            }),
+        }
+    }
+
+    /// `F x`.
+    fn apply(&self, x: &Vector6<f64>) -> Vector6<f64> {
+        match self {
+            Transition::PerAxis(f) => {
+                debug_assert!(f[(1, 0)] == 0.0 && f[(2, 0)] == 0.0 && f[(2, 1)] == 0.0, "upper triangular");
+                let mut y = Vector6::zeros();
+                for axis in 0..2 {
+                    let (p, v, a) = (axis, 2 + axis, 4 + axis);
+                    y[p] = f[(0, 0)] * x[p] + f[(0, 1)] * x[v] + f[(0, 2)] * x[a];
+                    y[v] = f[(1, 1)] * x[v] + f[(1, 2)] * x[a];
+                    y[a] = if f[(2, 2)] == 0.0 {
+                        x.iter().skip(1).fold(0.0 * x[0], |acc, &v| 0.0 * v + acc)
+                    } else {
+                        f[(2, 2)] * x[a]
+                    };
+                }
+                y
+            }
+            Transition::Turn { h, m } => Vector6::from_fn(|i, _| {
+                let (ve, vn) = (h[i] * x[2], m[i] * x[3]);
+                if i < 2 {
+                    x[i] + ve + vn
+                } else {
+                    ve + vn
+                }
+            }),
+        }
+    }
+
+    /// `F p F'`.
+    fn sandwich(&self, p: &Matrix6<f64>) -> Matrix6<f64> {
+        let (mut fp, mut out) = (Matrix6::zeros(), Matrix6::zeros());
+        match self {
+            Transition::PerAxis(f) => {
+                for axis in 0..2 {
+                    let (r0, r1, r2) = (axis, 2 + axis, 4 + axis);
+                    for c in 0..6 {
+                        let (b0, b1, b2) = (p[(r0, c)], p[(r1, c)], p[(r2, c)]);
+                        fp[(r0, c)] = f[(0, 0)] * b0 + f[(0, 1)] * b1 + f[(0, 2)] * b2;
+                        fp[(r1, c)] = f[(1, 1)] * b1 + f[(1, 2)] * b2;
+                        fp[(r2, c)] = f[(2, 2)] * b2;
+                    }
+                }
+                for axis in 0..2 {
+                    let (c0, c1, c2) = (axis, 2 + axis, 4 + axis);
+                    for i in 0..6 {
+                        let (b0, b1, b2) = (fp[(i, c0)], fp[(i, c1)], fp[(i, c2)]);
+                        out[(i, c0)] = b0 * f[(0, 0)] + b1 * f[(0, 1)] + b2 * f[(0, 2)];
+                        out[(i, c1)] = b1 * f[(1, 1)] + b2 * f[(1, 2)];
+                        out[(i, c2)] = b2 * f[(2, 2)];
+                    }
+                }
+            }
+            Transition::Turn { h, m } => {
+                for i in 0..6 {
+                    for c in 0..6 {
+                        let (ve, vn) = (h[i] * p[(2, c)], m[i] * p[(3, c)]);
+                        fp[(i, c)] = if i < 2 { p[(i, c)] + ve + vn } else { ve + vn };
+                    }
+                }
+                for j in 0..6 {
+                    for i in 0..6 {
+                        let (ve, vn) = (fp[(i, 2)] * h[j], fp[(i, 3)] * m[j]);
+                        out[(i, j)] = if j < 2 { fp[(i, j)] + ve + vn } else { ve + vn };
+                    }
+                }
+            }
+        }
+        out
     }
 }
 
@@ -197,6 +299,38 @@ fn singer_noise_numeric(alpha: f64, sigma_a: f64, t: f64) -> Matrix3<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_sparse_prediction_is_the_dense_products_bit_for_bit() {
+        // Entries of both signs and magnitudes from 1e-3 to 1e6, as a
+        // track's covariance and state have.
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut next = move || rng.gen_range(-0.5..0.5) * 10f64.powf(rng.gen_range(-3.0..6.0));
+        let models = [
+            MotionModel::ConstantVelocity { q: 0.5 },
+            MotionModel::ConstantAcceleration { q: 0.3 },
+            MotionModel::CoordinatedTurn { omega: 3f64.to_radians(), q: 0.5 },
+            MotionModel::CoordinatedTurn { omega: -3f64.to_radians(), q: 0.5 },
+            MotionModel::Singer { alpha: 0.5, sigma_a: 2.0 },
+            MotionModel::CurrentStatistical { alpha: 1.0, a_max: 8.0 },
+        ];
+        for _ in 0..200 {
+            let x = Vector6::from_fn(|_, _| next());
+            let a = Matrix6::from_fn(|_, _| next());
+            let p = a * a.transpose() + Matrix6::from_fn(|i, j| if i == j { 1.0 } else { next() });
+            for model in models {
+                for t in [0.0, 1e-4, 0.05, 0.5, 1.0, 7.3] {
+                    let (f, q) = model.transition_at(t, &x);
+                    let (px, pp) = model.predict(t, &x, &p);
+                    let (dx, dp) = (f * x, f * p * f.transpose() + q);
+                    let bits = |v: &[f64]| v.iter().map(|e| e.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(px.as_slice()), bits(dx.as_slice()), "{model:?} t {t}: mean");
+                    assert_eq!(bits(pp.as_slice()), bits(dp.as_slice()), "{model:?} t {t}: covariance");
+                }
+            }
+        }
+    }
 
     #[test]
     fn constant_velocity_moves_and_drops_acceleration() {
