@@ -53,14 +53,15 @@ pub fn parse_avr_token(token: &[u8]) -> Option<RawFrame> {
     if rest.len() < ts_digits + sig_digits {
         return None;
     }
-    let mut ts_bytes = [0u8; 8];
-    parse_hex_into(&rest[..ts_digits], &mut ts_bytes[2..])?;
-    let mut sig = [0u8; 1];
-    parse_hex_into(&rest[ts_digits..ts_digits + sig_digits], &mut sig)?;
-    let mut data = [0u8; 14];
-    let n = parse_hex_into(&rest[ts_digits + sig_digits..], &mut data)?;
-    let ts = if ts_digits > 0 { u64::from_be_bytes(ts_bytes) } else { 0 };
-    RawFrame::new(&data[..n], ts, sig[0])
+    // Timestamp, signal and frame in one pass: their digit counts are
+    // even, so the bytes split where the digits do.
+    let (ts_len, sig_len) = (ts_digits / 2, sig_digits / 2);
+    let mut bytes = [0u8; 6 + 1 + 14];
+    let n = parse_hex_into(rest, &mut bytes[..ts_len + sig_len + 14])? - ts_len - sig_len;
+    let mut ts = [0u8; 8];
+    ts[2..2 + ts_len].copy_from_slice(&bytes[..ts_len]);
+    let sig = if sig_len > 0 { bytes[ts_len] } else { 0 };
+    RawFrame::new(&bytes[ts_len + sig_len..][..n], u64::from_be_bytes(ts), sig)
 }
 
 impl FrameParser for AvrParser {
