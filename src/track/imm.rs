@@ -81,9 +81,11 @@ impl Imm {
     pub fn prepare(&self, dt: f64) -> Prepared {
         let (n, tr) = (self.spec.models.len(), &self.spec.transition);
         let c: PerModel<f64> = (0..n).map(|j| (0..n).map(|i| tr[(i, j)] * self.mu[i]).sum()).collect();
-        // Each prediction written where it stays: collecting them moved
-        // every 336-byte Gaussian once more (a tenth of a prediction's cost).
-        let mut predicted: PerModel<Gaussian> = self.filters.clone();
+        // Each prediction written where it stays (collecting them moved
+        // every 336-byte Gaussian once more), into zeros: a copy of the
+        // filters to overwrite cost twice as much.
+        let zero = Gaussian { x: Vector6::zeros(), p: Matrix6::zeros() };
+        let mut predicted: PerModel<Gaussian> = smallvec::smallvec![zero; n];
         for (j, ((cj, model), out)) in c.iter().zip(&self.spec.models).zip(predicted.iter_mut()).enumerate() {
             let w: PerModel<f64> = (0..n).map(|i| tr[(i, j)] * self.mu[i] / cj.max(1e-300)).collect();
             let mixed = combine(&self.filters, &w);
