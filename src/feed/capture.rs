@@ -255,8 +255,8 @@ fn parse_line(line: &[u8], ids: &FastMap<Vec<u8>, usize>) -> Option<Result<Captu
 
 /// A frame line as [`CaptureWriter`] writes it, `SECONDS ID <HEX;` with
 /// single spaces, in one pass; `None` for anything else, which the general
-/// parser then reads or reports (its word splitting was a third of the
-/// parsing thread's time).
+/// parser then reads or reports (its word splitting was over a quarter of
+/// the parsing thread's instructions).
 fn plain_frame_line(text: &[u8], ids: &FastMap<Vec<u8>, usize>) -> Option<CaptureRecord> {
     let space = |s: &[u8]| memchr::memchr(b' ', s);
     let first = space(text)?;
