@@ -235,9 +235,9 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
 /// cannot fall behind for long: they wait for its batches.
 fn yield_to_the_core_stages() {
     #[cfg(target_os = "linux")]
-    // SAFETY: gettid and setpriority take and return plain integers; on Linux a thread id
-    // with PRIO_PROCESS changes that one thread's nice value. Raising it
-    // needs no privilege, and a failure leaves the priority as it was.
+    // SAFETY: gettid and setpriority take and return plain integers. On
+    // Linux, PRIO_PROCESS with a thread id changes that one thread's nice
+    // value; raising it needs no privilege, and a failure leaves it as it was.
     unsafe {
         libc::setpriority(libc::PRIO_PROCESS, libc::gettid() as libc::id_t, 10);
     }
