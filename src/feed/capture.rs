@@ -362,8 +362,10 @@ fn digits8(v: u64) -> Option<u64> {
     // Pairs (10 a + b in every other byte), then the two halves of four.
     let pairs = d * 10 + (d >> 8);
     const EVERY_FOURTH: u64 = 0x0000_00FF_0000_00FF;
-    let quads = (pairs & EVERY_FOURTH) * (100 + (1_000_000 << 32))
-        + ((pairs >> 16) & EVERY_FOURTH) * (1 + (10_000 << 32));
+    // The products' low halves overflow by design: only bits 32.. are kept.
+    let quads = (pairs & EVERY_FOURTH)
+        .wrapping_mul(100 + (1_000_000 << 32))
+        .wrapping_add(((pairs >> 16) & EVERY_FOURTH).wrapping_mul(1 + (10_000 << 32)));
     Some(quads >> 32)
 }
 
