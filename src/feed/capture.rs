@@ -264,11 +264,7 @@ fn plain_frame_line(text: &[u8], ids: &FastMap<Vec<u8>, usize>) -> Option<Captur
     let rest = &text[first + 1..];
     let second = space(rest)?;
     let rx = *ids.get(&rest[..second])?;
-    let token = rest[second + 1..].strip_suffix(b";")?;
-    if token.first() != Some(&b'<') {
-        return None;
-    }
-    let frame = parse_avr_token(token)?;
+    let frame = frame_word(&rest[second + 1..]).ok()?;
     Some(CaptureRecord::Frame(CaptureFrame { arrival, rx, frame }))
 }
 
@@ -291,12 +287,17 @@ fn parse_frame_line(text: &[u8], ids: &FastMap<Vec<u8>, usize>) -> Result<Captur
     if words.next().is_some() {
         return Err("trailing text after the frame".into());
     }
-    let token = token.strip_suffix(b";").ok_or("frame must end with ';'")?;
-    if token.first() != Some(&b'<') {
-        return Err("frame must be in the '<' form".into());
-    }
-    let frame = parse_avr_token(token).ok_or("malformed frame")?;
+    let frame = frame_word(token)?;
     Ok(CaptureRecord::Frame(CaptureFrame { arrival, rx, frame }))
+}
+
+/// A line's frame, `<HEX;`, or why it is not one.
+fn frame_word(word: &[u8]) -> Result<RawFrame, &'static str> {
+    let token = word.strip_suffix(b";").ok_or("frame must end with ';'")?;
+    if token.first() != Some(&b'<') {
+        return Err("frame must be in the '<' form");
+    }
+    parse_avr_token(token).ok_or("malformed frame")
 }
 
 /// The words of a line, between runs of spaces and tabs (`memchr` finds
