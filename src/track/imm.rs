@@ -83,7 +83,7 @@ impl Imm {
         let c: PerModel<f64> = (0..n).map(|j| (0..n).map(|i| tr[(i, j)] * self.mu[i]).sum()).collect();
         // Each prediction written where it stays (collecting them moved
         // every 336-byte Gaussian once more), into zeros: a copy of the
-        // filters to overwrite cost twice as much.
+        // filters to overwrite cost a sixth more.
         let zero = Gaussian { x: Vector6::zeros(), p: Matrix6::zeros() };
         let mut predicted: PerModel<Gaussian> = smallvec::smallvec![zero; n];
         for (j, ((cj, model), out)) in c.iter().zip(&self.spec.models).zip(predicted.iter_mut()).enumerate() {
