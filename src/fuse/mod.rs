@@ -245,6 +245,9 @@ pub struct Fuser {
     cfg: FuseConfig,
     tcfg: Arc<TrackConfig>,
     spec: Arc<ImmSpec>,
+    /// The static/moving test every new aircraft starts with: its threshold,
+    /// a numerical chi-square inverse, is computed once.
+    motion: MotionTest,
     aircraft: FastMap<u32, Aircraft>,
     /// (release time, addr) of each waiting measurement, in release order.
     held: VecDeque<(f64, u32)>,
@@ -264,6 +267,7 @@ impl Fuser {
         let spec = tcfg.imm_spec();
         Fuser {
             cfg,
+            motion: MotionTest::new(tcfg.motion_window, tcfg.motion_false_alarm),
             tcfg: Arc::new(tcfg),
             spec,
             aircraft: FastMap::default(),
@@ -384,7 +388,7 @@ impl Fuser {
                     alt_baro_ft: None,
                     flight: None,
                     squawk: None,
-                    motion: MotionTest::new(self.tcfg.motion_window, self.tcfg.motion_false_alarm),
+                    motion: self.motion.clone(),
                     motion_plane: None,
                     motion_state: Motion::Unknown,
                     motion_t: f64::NEG_INFINITY,
@@ -534,7 +538,7 @@ impl Fuser {
             _ => {
                 let p = Plane::new(lat, lon, 0.0);
                 a.motion_plane = Some(p);
-                a.motion = MotionTest::new(a.motion.window_len(), a.motion.false_alarm());
+                a.motion.restart();
                 p
             }
         };

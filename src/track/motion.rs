@@ -105,7 +105,6 @@ impl Motion {
 #[derive(Clone, Debug)]
 pub struct MotionTest {
     n: usize,
-    pfa: f64,
     threshold: f64,
     window: std::collections::VecDeque<Fix2>,
 }
@@ -113,15 +112,13 @@ pub struct MotionTest {
 impl MotionTest {
     pub fn new(n: usize, pfa: f64) -> MotionTest {
         assert!(n >= 2, "a window of at least two fixes");
-        MotionTest { n, pfa, threshold: threshold(2 * (n - 1), pfa), window: Default::default() }
+        MotionTest { n, threshold: threshold(2 * (n - 1), pfa), window: Default::default() }
     }
 
-    pub fn window_len(&self) -> usize {
-        self.n
-    }
-
-    pub fn false_alarm(&self) -> f64 {
-        self.pfa
+    /// Forgets the fixes (the plane they were measured in has moved) but keeps
+    /// the threshold, whose numerical inverse is costly to recompute.
+    pub fn restart(&mut self) {
+        self.window.clear();
     }
 
     pub fn push(&mut self, fix: Fix2) -> Motion {
@@ -132,8 +129,7 @@ impl MotionTest {
         if self.window.len() < self.n {
             return Motion::Unknown;
         }
-        let w: Vec<Fix2> = self.window.iter().copied().collect();
-        match statistic_2d(&w) {
+        match statistic_2d(self.window.make_contiguous()) {
             Some(s) if s <= self.threshold => Motion::Static,
             Some(_) => Motion::Moving,
             None => Motion::Unknown,
