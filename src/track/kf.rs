@@ -117,8 +117,9 @@ impl Gaussian {
 
     /// Covariance symmetric, finite and positive definite.
     pub fn healthy(&self) -> bool {
-        self.x.iter().all(|v| v.is_finite())
-            && self.p.iter().all(|v| v.is_finite())
+        // Over the plain arrays: nalgebra's element iterator cost a tenth of an
+        // IMM update for these 42 checks.
+        self.x.as_slice().iter().chain(self.p.as_slice()).all(|v| v.is_finite())
             && self.p.cholesky().is_some()
     }
 }
