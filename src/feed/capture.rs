@@ -258,8 +258,12 @@ fn parse_line(line: &[u8], ids: &FastMap<Vec<u8>, usize>) -> Option<Result<Captu
 /// parser then reads or reports (its word splitting was over a quarter of
 /// the parsing thread's instructions).
 fn plain_frame_line(text: &[u8], ids: &FastMap<Vec<u8>, usize>) -> Option<CaptureRecord> {
-    let space = |s: &[u8]| memchr::memchr(b' ', s);
-    let first = space(text)?;
+    // The words before the frame are a few bytes long, too short for
+    // memchr's vector set-up to pay: a plain scan, and the arrival time's
+    // width as the writer writes it (`%.6f` of ten-digit seconds) tried
+    // first. A space before that place leaves a word fast_decimal refuses.
+    let space = |s: &[u8]| s.iter().position(|&b| b == b' ');
+    let first = if text.get(17) == Some(&b' ') { 17 } else { space(text)? };
     let arrival = fast_decimal(&text[..first])?;
     let rest = &text[first + 1..];
     let second = space(rest)?;
@@ -323,30 +327,40 @@ fn fast_decimal(s: &[u8]) -> Option<f64> {
         1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16, 1e17,
         1e18, 1e19, 1e20, 1e21, 1e22,
     ];
-    let (int, frac) = match s.iter().position(|&b| b == b'.') {
-        Some(dot) => (&s[..dot], &s[dot + 1..]),
-        None => (s, &[][..]),
-    };
-    let digits = int.len() + frac.len();
+    let dot = s.iter().position(|&b| b == b'.');
+    let (int_end, frac_start) = dot.map_or((s.len(), s.len()), |d| (d, d + 1));
+    let frac_len = s.len() - frac_start;
+    let digits = int_end + frac_len;
     if digits == 0 || digits > 19 {
         return None;
     }
+    static POW10_U64: [u64; 8] = [1, 10, 100, 1_000, 10_000, 100_000, 1_000_000, 10_000_000];
     // Nineteen digits fit a u64; a second dot or any other byte fails.
     let mut m = 0u64;
-    for part in [int, frac] {
-        let mut eights = part.chunks_exact(8);
+    for (start, end) in [(0, int_end), (frac_start, s.len())] {
+        let mut eights = s[start..end].chunks_exact(8);
         for eight in &mut eights {
             m = m * 100_000_000 + digits8(u64::from_le_bytes(eight.try_into().expect("eight bytes")))?;
         }
-        for &b in eights.remainder() {
-            let d = b.wrapping_sub(b'0');
-            if d > 9 {
-                return None;
-            }
-            m = m * 10 + d as u64;
+        // The last few digits as one more group of eight, the bytes before
+        // them read as zeros: the eight bytes that end with them when there
+        // are eight, else a copy. A digit at a time was half of this
+        // function's instructions.
+        let k = eights.remainder().len();
+        if k > 0 {
+            let tail = if end >= 8 {
+                let v = u64::from_le_bytes(s[end - 8..end].try_into().expect("eight bytes"));
+                let keep = !0u64 << (8 * (8 - k));
+                (v & keep) | (0x3030_3030_3030_3030 & !keep)
+            } else {
+                let mut padded = [b'0'; 8];
+                padded[8 - k..].copy_from_slice(&s[end - k..end]);
+                u64::from_le_bytes(padded)
+            };
+            m = m * POW10_U64[k] + digits8(tail)?;
         }
     }
-    (m <= 1 << 53).then(|| m as f64 / POW10[frac.len()])
+    (m <= 1 << 53).then(|| m as f64 / POW10[frac_len])
 }
 
 /// Eight decimal digits (the first in the lowest byte) as their number,
