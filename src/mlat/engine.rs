@@ -685,11 +685,13 @@ impl Mlat {
     fn sync_from(&mut self, copies: &[LocalCopy], p: [f64; 3], sigma_pos: f64, now: f64) -> (f64, u32) {
         self.stats.sync_messages += 1;
         let n = copies.len();
-        let ranges: Vec<f64> = copies.iter().map(|c| ecef_distance(self.rxs[c.rx].ecef, p)).collect();
-        let var: Vec<f64> = copies.iter().map(|c| self.rxs[c.rx].sigma_t.powi(2)).collect();
+        // On the stack: a sync message's dozen heap lists cost as much as
+        // its clock filters' updates.
+        let ranges: GroupVec<f64> = copies.iter().map(|c| ecef_distance(self.rxs[c.rx].ecef, p)).collect();
+        let var: GroupVec<f64> = copies.iter().map(|c| self.rxs[c.rx].sigma_t.powi(2)).collect();
         // The emitter's position error moves the two ranges differently: by
         // the difference of the unit vectors towards the receivers.
-        let units: Vec<[f64; 3]> = copies
+        let units: GroupVec<[f64; 3]> = copies
             .iter()
             .zip(&ranges)
             .map(|(c, r)| {
@@ -697,11 +699,11 @@ impl Mlat {
                 [(e[0] - p[0]) / r, (e[1] - p[1]) / r, (e[2] - p[2]) / r]
             })
             .collect();
-        let mut geom = vec![vec![0.0; n]; n];
+        let mut geom: smallvec::SmallVec<[f64; 64]> = smallvec::smallvec![0.0; n * n];
         for a in 0..n {
             for b in 0..n {
                 let d2: f64 = (0..3).map(|k| (units[a][k] - units[b][k]).powi(2)).sum();
-                geom[a][b] = sigma_pos * sigma_pos * d2 / (C_AIR * C_AIR);
+                geom[a * n + b] = sigma_pos * sigma_pos * d2 / (C_AIR * C_AIR);
             }
         }
         self.sync.observe(copies, &ranges, &var, &geom, now)

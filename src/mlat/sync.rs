@@ -101,7 +101,8 @@ impl ClockSync {
     /// A transmission from a known position heard by several receivers: one
     /// measurement for every pair. `ranges` are emitter-receiver distances
     /// (m), `var` each copy's timing variance plus its share of the
-    /// emitter's position error (s^2). Returns the summed normalised
+    /// emitter's position error (s^2), `geom_var` the pairs' shared part of
+    /// the latter, row-major (`a * n + b`). Returns the summed normalised
     /// innovation (each capped at 100) of the pair measurements that met a
     /// converged filter, and how many those were, so the caller can judge the
     /// emitter too.
@@ -110,7 +111,7 @@ impl ClockSync {
         copies: &[LocalCopy],
         ranges: &[f64],
         var: &[f64],
-        geom_var: &[Vec<f64>],
+        geom_var: &[f64],
         now: f64,
     ) -> (f64, u32) {
         let (mut nis_sum, mut judged) = (0.0, 0);
@@ -126,14 +127,19 @@ impl ClockSync {
                     (cb.rx, ca.rx, cb.t, ca.t, ranges[b], ranges[a])
                 };
                 let z = (tj - rj / C_AIR) - (ti - ri / C_AIR);
-                let r = var[a] + var[b] + geom_var[a][b];
+                let r = var[a] + var[b] + geom_var[a * copies.len() + b];
                 let tau = ti - ri / C_AIR;
                 let params = self.params;
-                let result = match self.pairs.get_mut(&(i, j)) {
-                    Some(f) => f.update(z, r, tau, now, &params),
+                // The filter's verdict read while it is at hand: a second
+                // lookup per pair was a fifth of this function.
+                let converged = |f: &PairFilter| (f.updates > params.min_updates * 2).then_some(f.last_nis);
+                let (result, nis) = match self.pairs.get_mut(&(i, j)) {
+                    Some(f) => (f.update(z, r, tau, now, &params), converged(f)),
                     None => {
-                        self.pairs.insert((i, j), PairFilter::new(z, r, tau, now, &params));
-                        Update::Accepted
+                        let f = PairFilter::new(z, r, tau, now, &params);
+                        let nis = converged(&f);
+                        self.pairs.insert((i, j), f);
+                        (Update::Accepted, nis)
                     }
                 };
                 self.stats.updates += 1;
@@ -143,8 +149,8 @@ impl ClockSync {
                     Update::Accepted => {}
                 }
                 let outlier = result != Update::Accepted;
-                if let Some(f) = self.pairs.get(&(i, j)).filter(|f| f.updates > params.min_updates * 2) {
-                    nis_sum += f.last_nis.min(100.0);
+                if let Some(nis) = nis {
+                    nis_sum += nis.min(100.0);
                     judged += 1;
                 }
                 for rx in [i, j] {
@@ -286,7 +292,7 @@ mod tests {
         s.add_receiver(ClockKind::Beast12);
         s.add_receiver(ClockKind::Beast12);
         let clock1 = |t0: f64| 5000.0 + t0 * (1.0 + 100e-6);
-        let g = vec![vec![0.0; 2]; 2];
+        let g = [0.0; 4];
         for k in 0..20 {
             let t0 = 100.0 + k as f64 * 0.5;
             s.observe(
@@ -316,7 +322,7 @@ mod tests {
         s.add_receiver(ClockKind::Beast12); // 2: offset -50 s
         let offsets = [100.0, 0.0, -50.0];
         let var = [1e-16; 3];
-        let g = vec![vec![0.0; 3]; 3];
+        let g = [0.0; 9];
         // Sync transmissions at equal range: times are true time plus offset.
         for k in 0..10 {
             let t = 1000.0 + k as f64;
