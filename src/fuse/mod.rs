@@ -117,7 +117,8 @@ pub struct TrackReport {
     pub source: &'static str,
     pub est: Estimate,
     pub alt_baro_ft: Option<i32>,
-    pub sources: Vec<&'static str>,
+    /// Inline: a heap list per published track was measurable.
+    pub sources: smallvec::SmallVec<[&'static str; 2]>,
     pub nac_p: Option<u8>,
     pub period_s: f64,
     pub motion: Motion,
@@ -718,7 +719,7 @@ impl Fuser {
         };
         let period = a.period_s(&self.tcfg);
         let window = self.cfg.sources_window_s;
-        let sources: Vec<&'static str> = [Source::Adsb, Source::Mlat]
+        let sources = [Source::Adsb, Source::Mlat]
             .into_iter()
             .filter(|s| t - a.last_source_t[*s as usize] <= window)
             .map(Source::name)
@@ -749,21 +750,23 @@ impl Fuser {
                 (x, y) => x.or(y),
             },
         };
-        let report = |source: &'static str, est: Estimate, sources: Vec<&'static str>| TrackReport {
-            id: a.id,
-            addr,
-            source,
-            est,
-            alt_baro_ft: a.alt_baro_ft,
-            sources,
-            nac_p: a.nac_p,
-            period_s: period,
-            motion: a.motion_state,
-            adsb_suspect: a.adsb_suspect,
-            flight: a.flight.clone(),
-            squawk: a.squawk,
-            ages_s: [Source::Adsb, Source::Mlat]
-                .map(|s| Some((t - a.last_source_t[s as usize]).max(0.0)).filter(|age| *age <= window)),
+        let report = |source: &'static str, est: Estimate, sources: smallvec::SmallVec<[&'static str; 2]>| {
+            TrackReport {
+                id: a.id,
+                addr,
+                source,
+                est,
+                alt_baro_ft: a.alt_baro_ft,
+                sources,
+                nac_p: a.nac_p,
+                period_s: period,
+                motion: a.motion_state,
+                adsb_suspect: a.adsb_suspect,
+                flight: a.flight.clone(),
+                squawk: a.squawk,
+                ages_s: [Source::Adsb, Source::Mlat]
+                    .map(|s| Some((t - a.last_source_t[s as usize]).max(0.0)).filter(|age| *age <= window)),
+            }
         };
         if let Some(est) = fused {
             out.push(Output::Track(Box::new(report("fused", est, sources))));
@@ -772,7 +775,7 @@ impl Fuser {
         if self.publish_source_tracks {
             for (s, est) in [(Source::Adsb, adsb), (Source::Mlat, mlat)] {
                 if let Some(est) = est {
-                    out.push(Output::Track(Box::new(report(s.name(), est, vec![s.name()]))));
+                    out.push(Output::Track(Box::new(report(s.name(), est, smallvec::smallvec![s.name()]))));
                 }
             }
         }

@@ -226,53 +226,72 @@ impl ClockSync {
         }
         // Edge weights once per pair: offset and variance, or None when the
         // pair is not usable; the reverse edge is the same relation inverted.
-        let mut w: smallvec::SmallVec<[Option<(f64, f64)>; 64]> = smallvec::smallvec![None; n * n];
+        // Plain loops over slices: iterator adapters and the small vectors'
+        // checks on every access were two thirds of this function.
+        let mut w_buf: smallvec::SmallVec<[Option<(f64, f64)>; 64]> = smallvec::smallvec![None; n * n];
+        let w = &mut w_buf[..];
         for a in 0..n {
+            let ca = copies[a];
             for b in a + 1..n {
-                if let Some((off, var)) = self.edge(copies[a].rx, copies[b].rx, copies[a].t, now) {
+                if let Some((off, var)) = self.edge(ca.rx, copies[b].rx, ca.t, now) {
                     w[a * n + b] = Some((off, var));
                     w[b * n + a] = Some((-off, var));
                 }
             }
         }
-        let root = (0..n)
-            .max_by_key(|&a| {
-                let gps = self.clocks[copies[a].rx] == ClockKind::Gps;
-                let degree = (0..n).filter(|&b| w[a * n + b].is_some()).count();
-                (gps as usize, degree, usize::MAX - a)
-            })
-            .expect("non-empty");
+        let w = &*w;
+        // The root: a GPS receiver if any, then the most edges, then the lowest index.
+        let mut root = 0;
+        let mut root_key = (false, 0);
+        for a in 0..n {
+            let gps = self.clocks[copies[a].rx] == ClockKind::Gps;
+            let degree = w[a * n..(a + 1) * n].iter().filter(|e| e.is_some()).count();
+            if a == 0 || (gps, degree) > root_key {
+                (root, root_key) = (a, (gps, degree));
+            }
+        }
         // Prim's algorithm on variance, converting times as the tree grows:
         // each receiver outside the tree keeps its cheapest edge from it
         // (O(n^2), where rescanning every pair of tree and non-tree for each
         // addition was O(n^3)). Ties go to the lowest tree index, then the
         // lowest receiver index.
         out[root] = Some((copies[root].t, 0.0));
-        let mut in_tree: GroupVec<bool> = smallvec::smallvec![false; n];
+        let times = &mut out[..];
+        let mut in_tree_buf: GroupVec<bool> = smallvec::smallvec![false; n];
+        let in_tree = &mut in_tree_buf[..];
         // (accumulated variance, tree end, offset) of each receiver's best edge.
-        let mut best: GroupVec<Option<(f64, usize, f64)>> = smallvec::smallvec![None; n];
+        let mut best_buf: GroupVec<Option<(f64, usize, f64)>> = smallvec::smallvec![None; n];
+        let best = &mut best_buf[..];
         let mut added = root;
         loop {
             in_tree[added] = true;
-            let base = out[added].expect("in tree").1;
-            for b in (0..n).filter(|&b| !in_tree[b]) {
+            let base = times[added].expect("in tree").1;
+            let row = &w[added * n..(added + 1) * n];
+            // Each outside receiver's best edge updated, and the cheapest of
+            // them all found, in one pass.
+            let mut next: Option<(f64, usize, usize, f64)> = None;
+            for b in 0..n {
+                if in_tree[b] {
+                    continue;
+                }
                 // Edge added -> b: t_b = t_added + offset.
-                if let Some((off, var)) = w[added * n + b] {
+                if let Some((off, var)) = row[b] {
                     let acc = base + var;
                     if best[b].is_none_or(|(x, a, _)| acc < x || (acc == x && added < a)) {
                         best[b] = Some((acc, added, off));
                     }
                 }
+                if let Some((acc, a, off)) = best[b] {
+                    if next.is_none_or(|(x, xa, _, _)| (acc, a) < (x, xa)) {
+                        next = Some((acc, a, b, off));
+                    }
+                }
             }
-            let next = (0..n)
-                .filter(|&b| !in_tree[b])
-                .filter_map(|b| best[b].map(|(acc, a, off)| (acc, a, b, off)))
-                .reduce(|x, y| if (y.0, y.1) < (x.0, x.1) { y } else { x });
             let Some((acc, a, b, off)) = next else { break };
             // b's own time, moved into a's clock, then a's conversion to the root applies.
-            let (ta_root, _) = out[a].expect("in tree");
+            let (ta_root, _) = times[a].expect("in tree");
             let tb_in_a = copies[b].t - off;
-            out[b] = Some((ta_root + (tb_in_a - copies[a].t), acc));
+            times[b] = Some((ta_root + (tb_in_a - copies[a].t), acc));
             added = b;
         }
         (out, root)

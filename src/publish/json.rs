@@ -1,7 +1,7 @@
 //! The track stream's JSON lines (contract): one object per event, `type` and
 //! `t` always present, absent fields left out rather than null.
 
-use serde::Serialize;
+use serde::{Serialize, Serializer};
 
 use crate::core::{Event, PositionReport};
 use crate::fuse::{Alert, TrackReport};
@@ -11,7 +11,7 @@ use crate::mlat::MlatFix;
 struct MlatRecord<'a> {
     #[serde(rename = "type")]
     kind: &'static str,
-    hex: String,
+    hex: Hex,
     t: f64,
     lat: f64,
     lon: f64,
@@ -28,7 +28,7 @@ struct PositionRecord<'a> {
     #[serde(rename = "type")]
     kind: &'static str,
     source: &'static str,
-    hex: String,
+    hex: Hex,
     t: f64,
     lat: f64,
     lon: f64,
@@ -44,12 +44,42 @@ struct PositionRecord<'a> {
     receiver: &'a str,
 }
 
+/// A number as upper-case hex digits, at least `width` of them (what
+/// `format!("{:06X}")` writes), serialised as a string from the stack: a
+/// heap string per record and per address was a tenth of writing it.
+#[derive(Clone, Copy)]
+struct Hex {
+    digits: [u8; 8],
+    len: u8,
+}
+
+impl Hex {
+    fn new(v: u32, width: usize) -> Hex {
+        let len = width.max((32 - v.leading_zeros() as usize).div_ceil(4)).min(8);
+        let mut digits = [0u8; 8];
+        for (i, d) in digits[..len].iter_mut().enumerate() {
+            *d = b"0123456789ABCDEF"[((v >> (4 * (len - 1 - i))) & 0xF) as usize];
+        }
+        Hex { digits, len: len as u8 }
+    }
+
+    fn addr(addr: u32) -> Hex {
+        Hex::new(addr, 6)
+    }
+}
+
+impl Serialize for Hex {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(std::str::from_utf8(&self.digits[..self.len as usize]).expect("hex digits are ASCII"))
+    }
+}
+
 #[derive(Serialize)]
-pub struct TrackRecord {
+pub struct TrackRecord<'a> {
     #[serde(rename = "type")]
     kind: &'static str,
     id: u64,
-    hex: String,
+    hex: Hex,
     t: f64,
     lat: f64,
     lon: f64,
@@ -60,24 +90,24 @@ pub struct TrackRecord {
     vel_enu: [f64; 3],
     cov_en: [[f64; 2]; 2],
     source: &'static str,
-    sources: Vec<&'static str>,
+    sources: &'a [&'static str],
     #[serde(skip_serializing_if = "Option::is_none")]
     nac_p: Option<u8>,
     period_s: f64,
     motion: &'static str,
     adsb_suspect: bool,
     #[serde(skip_serializing_if = "Option::is_none")]
-    flight: Option<String>,
+    flight: Option<&'a str>,
     #[serde(skip_serializing_if = "Option::is_none")]
-    squawk: Option<String>,
+    squawk: Option<Hex>,
 }
 
-pub fn track_record(r: &TrackReport) -> TrackRecord {
+pub fn track_record(r: &TrackReport) -> TrackRecord<'_> {
     let e = &r.est;
     TrackRecord {
         kind: "track",
         id: r.id,
-        hex: format!("{:06X}", r.addr),
+        hex: Hex::addr(r.addr),
         t: round(e.t, 1e6),
         lat: round(e.lat, 1e8),
         lon: round(e.lon, 1e8),
@@ -86,13 +116,13 @@ pub fn track_record(r: &TrackReport) -> TrackRecord {
         vel_enu: e.vel_enu.map(|v| round(v, 1e3)),
         cov_en: e.cov_en().map(|row| row.map(|v| round(v, 1e3))),
         source: r.source,
-        sources: r.sources.clone(),
+        sources: &r.sources,
         nac_p: r.nac_p,
         period_s: r.period_s,
         motion: r.motion.name(),
         adsb_suspect: r.adsb_suspect,
-        flight: r.flight.clone().filter(|f| !f.is_empty()),
-        squawk: r.squawk.map(|s| format!("{s:04X}")),
+        flight: r.flight.as_deref().filter(|f| !f.is_empty()),
+        squawk: r.squawk.map(|s| Hex::new(s.into(), 4)),
     }
 }
 
@@ -141,7 +171,7 @@ fn position_record<'a>(p: &PositionReport, receiver: &'a str) -> PositionRecord<
         // A decoded ADS-B position report, before any tracking.
         kind: "position",
         source: "adsb",
-        hex: format!("{:06X}", p.addr),
+        hex: Hex::addr(p.addr),
         t: round(p.t, 1e6),
         lat: round(p.lat, 1e8),
         lon: round(p.lon, 1e8),
@@ -161,7 +191,7 @@ fn round(v: f64, k: f64) -> f64 {
 fn mlat_record<'a>(f: &MlatFix, receiver_id: &impl Fn(usize) -> &'a str) -> MlatRecord<'a> {
     MlatRecord {
         kind: "mlat",
-        hex: format!("{:06X}", f.addr),
+        hex: Hex::addr(f.addr),
         t: round(f.t, 1e9),
         lat: round(f.lat, 1e8),
         lon: round(f.lon, 1e8),
@@ -171,5 +201,22 @@ fn mlat_record<'a>(f: &MlatFix, receiver_id: &impl Fn(usize) -> &'a str) -> Mlat
         gdop: round(f.gdop, 1e3),
         chi2: round(f.chi2, 1e3),
         altitude_used: f.altitude_used,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hex_writes_what_the_standard_formatter_writes() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let edges = [0, 1, 0xF, 0x10, 0xFFF, 0xFFFF, 0x1_0000, 0xFF_FFFF, 0x100_0000, u32::MAX];
+        for v in edges.into_iter().chain((0..20_000).map(|_| rng.gen::<u32>() >> rng.gen_range(0..32))) {
+            let json = |h: Hex| serde_json::to_string(&h).unwrap();
+            assert_eq!(json(Hex::addr(v)), format!("\"{v:06X}\""));
+            assert_eq!(json(Hex::new(v, 4)), format!("\"{v:04X}\""));
+        }
     }
 }
