@@ -109,8 +109,9 @@ impl Imm {
         self.step_linear(dt, &m.linear())
     }
 
-    /// Predicts over `dt` and updates with `m`. `None` (and no change) when a
-    /// model's update is numerically impossible: the caller resets the track.
+    /// Predicts over `dt` and updates with `m`. `None` when a model's update
+    /// is numerically impossible: the filter is then spent (partly updated)
+    /// and the caller resets the track.
     pub fn step_linear<const M: usize>(&mut self, dt: f64, m: &Linear<M>) -> Option<Step> {
         let p = self.prepare(dt);
         self.update(&p, m)
@@ -118,7 +119,7 @@ impl Imm {
 
     /// The update half of a step, from a preparation of this filter. The
     /// result depends only on `p` and `m`, so calling it again with another
-    /// `m` replaces the previous update.
+    /// `m` replaces the previous update. `None` as for [`Imm::step_linear`].
     pub fn update<const M: usize>(&mut self, p: &Prepared, m: &Linear<M>) -> Option<Step> {
         self.update_with(
             p,
@@ -139,11 +140,13 @@ impl Imm {
         nis: impl Fn(&Gaussian) -> f64,
     ) -> Option<Step> {
         let n = self.spec.models.len();
-        let mut post = PerModel::with_capacity(n);
         let mut lik = PerModel::<f64>::with_capacity(n);
-        for (pred, cj) in p.predicted.iter().zip(&p.c) {
+        // Each posterior written where it stays: collecting them and moving
+        // the list into the filters copied 1.3 KB a step. Nothing reads the
+        // filters before they are all written (`p` holds the predictions).
+        for ((pred, cj), f) in p.predicted.iter().zip(&p.c).zip(self.filters.iter_mut()) {
             let u = update(pred)?;
-            post.push(u.post);
+            *f = u.post;
             lik.push(u.log_likelihood + cj.max(1e-300).ln());
         }
         // Model probabilities by log-sum-exp: a measurement far from every
@@ -157,11 +160,10 @@ impl Imm {
         let mu: PerModel<f64> = w.iter().map(|x| x / total).collect();
         // NIS of the combined prediction (the track's own consistency check).
         let nis = nis(&p.combined());
-        let estimate = combine(&post, &mu);
+        let estimate = combine(&self.filters, &mu);
         if !estimate.healthy() {
             return None;
         }
-        self.filters = post;
         self.mu = mu;
         Some(Step { estimate, nis })
     }
