@@ -105,7 +105,9 @@ fn main() {
     for speed in speeds {
         let sub = UdpSocket::bind("127.0.0.1:0").unwrap();
         fuse1090::live::stamp::enable(&sub).unwrap();
-        let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+        // A free UDP port (the daemon's input is UDP: a port a TCP bind
+        // found free can still be a UDP socket's, the subscriber's among them).
+        let port = UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
         let mut cfg = format!(
             "[service]\nstats_interval_s = 1000.0\nqueue_frames = 262144\n\n[[input]]\nkind = \"udp\"\naddress = \"127.0.0.1:{port}\"\n\n[[output]]\nkind = \"udp\"\naddress = \"{}\"\nformat = \"json\"\n\n",
             sub.local_addr().unwrap()
@@ -132,6 +134,10 @@ fn main() {
             .spawn()
             .unwrap();
         std::thread::sleep(Duration::from_millis(300));
+        if let Ok(Some(status)) = daemon.try_wait() {
+            let log = std::fs::read_to_string(dir.join("daemon.log")).unwrap_or_default();
+            panic!("the daemon exited at start ({status}):\n{log}");
+        }
         let pid = daemon.id();
         let started = Instant::now();
         let replay = Command::new(env!("CARGO_BIN_EXE_fuse1090"))
