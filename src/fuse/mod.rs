@@ -109,6 +109,10 @@ pub enum Alert {
     Conflict { t: f64, pair: [(u32, u64); 2], active: bool, tau_s: f64, t_cpa_s: f64, miss_m: f64, dz_m: f64 },
 }
 
+/// The sources that fed a track lately, by name; inline (a heap list per
+/// published track was measurable).
+pub type Sources = smallvec::SmallVec<[&'static str; 2]>;
+
 /// A published track state (contract `type: "track"`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct TrackReport {
@@ -117,8 +121,7 @@ pub struct TrackReport {
     pub source: &'static str,
     pub est: Estimate,
     pub alt_baro_ft: Option<i32>,
-    /// Inline: a heap list per published track was measurable.
-    pub sources: smallvec::SmallVec<[&'static str; 2]>,
+    pub sources: Sources,
     pub nac_p: Option<u8>,
     pub period_s: f64,
     pub motion: Motion,
@@ -750,23 +753,21 @@ impl Fuser {
                 (x, y) => x.or(y),
             },
         };
-        let report = |source: &'static str, est: Estimate, sources: smallvec::SmallVec<[&'static str; 2]>| {
-            TrackReport {
-                id: a.id,
-                addr,
-                source,
-                est,
-                alt_baro_ft: a.alt_baro_ft,
-                sources,
-                nac_p: a.nac_p,
-                period_s: period,
-                motion: a.motion_state,
-                adsb_suspect: a.adsb_suspect,
-                flight: a.flight.clone(),
-                squawk: a.squawk,
-                ages_s: [Source::Adsb, Source::Mlat]
-                    .map(|s| Some((t - a.last_source_t[s as usize]).max(0.0)).filter(|age| *age <= window)),
-            }
+        let report = |source: &'static str, est: Estimate, sources: Sources| TrackReport {
+            id: a.id,
+            addr,
+            source,
+            est,
+            alt_baro_ft: a.alt_baro_ft,
+            sources,
+            nac_p: a.nac_p,
+            period_s: period,
+            motion: a.motion_state,
+            adsb_suspect: a.adsb_suspect,
+            flight: a.flight.clone(),
+            squawk: a.squawk,
+            ages_s: [Source::Adsb, Source::Mlat]
+                .map(|s| Some((t - a.last_source_t[s as usize]).max(0.0)).filter(|age| *age <= window)),
         };
         if let Some(est) = fused {
             out.push(Output::Track(Box::new(report("fused", est, sources))));
