@@ -99,11 +99,21 @@ pub struct Conflict {
 
 /// The pair test.
 pub fn assess(cfg: &ConflictConfig, a: &Kinematics, b: &Kinematics) -> Option<Conflict> {
-    let lvl = level(a.alt_ft.min(b.alt_ft));
-    let (dx, dy, dz) = (b.pos[0] - a.pos[0], b.pos[1] - a.pos[1], b.pos[2] - a.pos[2]);
-    let (vx, vy, vz) = (b.vel[0] - a.vel[0], b.vel[1] - a.vel[1], b.vel[2] - a.vel[2]);
+    let (dz, vz) = (b.pos[2] - a.pos[2], b.vel[2] - a.vel[2]);
     // The vertical test first: it is cheap and most pairs in a cell are at
-    // other levels.
+    // other levels. Before the level is even looked up, the test with the
+    // table's loosest values (ZTHR 1,200 ft to be within, 850 ft and tau
+    // 48 s to close on): a pair that fails it fails at every level, and
+    // the lookup was half of a rejected pair's cost.
+    let within = |zthr_ft: f64| dz.abs() < zthr_ft * FT_TO_M;
+    let closing =
+        |zthr_ft: f64, tau_s: f64| dz * vz < 0.0 && (dz.abs() - zthr_ft * FT_TO_M) / vz.abs() < tau_s;
+    if !(within(1_200.0) || closing(850.0, 48.0)) {
+        return None;
+    }
+    let lvl = level(a.alt_ft.min(b.alt_ft));
+    let (dx, dy) = (b.pos[0] - a.pos[0], b.pos[1] - a.pos[1]);
+    let (vx, vy) = (b.vel[0] - a.vel[0], b.vel[1] - a.vel[1]);
     let zthr = lvl.zthr_ft * FT_TO_M;
     let vertical = dz.abs() < zthr || (dz * vz < 0.0 && (dz.abs() - zthr) / vz.abs() < lvl.tau_s);
     if !vertical {
@@ -183,6 +193,16 @@ mod tests {
 
     fn k(addr: u32, x: f64, y: f64, vx: f64, vy: f64, alt_ft: f64) -> Kinematics {
         Kinematics { addr, pos: [x, y, alt_ft * FT_TO_M], vel: [vx, vy, 0.0], alt_ft }
+    }
+
+    #[test]
+    fn the_vertical_prefilter_is_looser_than_every_level() {
+        // `assess` rejects before looking the level up with ZTHR 1,200 ft
+        // (within), 850 ft and tau 48 s (closing): no level may be looser.
+        for ft in (-2_000..60_000).step_by(50) {
+            let l = level(ft as f64);
+            assert!((850.0..=1_200.0).contains(&l.zthr_ft) && l.tau_s <= 48.0, "{ft} ft: {l:?}");
+        }
     }
 
     #[test]
