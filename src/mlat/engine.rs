@@ -699,9 +699,10 @@ impl Mlat {
                 [(e[0] - p[0]) / r, (e[1] - p[1]) / r, (e[2] - p[2]) / r]
             })
             .collect();
+        // Only the pairs `observe` reads (a before b).
         let mut geom: smallvec::SmallVec<[f64; 64]> = smallvec::smallvec![0.0; n * n];
         for a in 0..n {
-            for b in 0..n {
+            for b in a + 1..n {
                 let d2: f64 = (0..3).map(|k| (units[a][k] - units[b][k]).powi(2)).sum();
                 geom[a * n + b] = sigma_pos * sigma_pos * d2 / (C_AIR * C_AIR);
             }

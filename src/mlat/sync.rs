@@ -102,7 +102,7 @@ impl ClockSync {
     /// measurement for every pair. `ranges` are emitter-receiver distances
     /// (m), `var` each copy's timing variance plus its share of the
     /// emitter's position error (s^2), `geom_var` the pairs' shared part of
-    /// the latter, row-major (`a * n + b`). Returns the summed normalised
+    /// the latter, row-major (`a * n + b`, read for a < b). Returns the summed normalised
     /// innovation (each capped at 100) of the pair measurements that met a
     /// converged filter, and how many those were, so the caller can judge the
     /// emitter too.
