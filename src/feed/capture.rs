@@ -136,7 +136,7 @@ pub struct CaptureReader<R> {
     line_no: usize,
     line: Vec<u8>,
     receivers: Vec<ReceiverDecl>,
-    ids: FastMap<Vec<u8>, usize>,
+    ids: ReceiverIds,
     pub skipped: u64,
     pub errors: Vec<LineError>,
 }
@@ -152,7 +152,7 @@ impl<R: BufRead> CaptureReader<R> {
             line_no: 0,
             line: Vec::with_capacity(128),
             receivers: Vec::new(),
-            ids: FastMap::default(),
+            ids: ReceiverIds::default(),
             skipped: 0,
             errors: Vec::new(),
         }
@@ -185,11 +185,11 @@ impl<R: BufRead> CaptureReader<R> {
             match parsed {
                 None => continue,
                 Some(Ok(CaptureRecord::Receiver(r))) => {
-                    if self.ids.contains_key(r.id.as_bytes()) {
+                    if self.ids.get(r.id.as_bytes()).is_some() {
                         self.skip(format!("receiver {} declared twice", r.id));
                         continue;
                     }
-                    self.ids.insert(r.id.as_bytes().to_vec(), self.receivers.len());
+                    self.ids.insert(r.id.as_bytes(), self.receivers.len());
                     self.receivers.push(r.clone());
                     return Ok(Some(CaptureRecord::Receiver(r)));
                 }
@@ -237,8 +237,41 @@ fn parse_receiver(text: &str) -> Result<CaptureRecord, String> {
     }))
 }
 
+/// Receivers by their capture id. Ids of up to seven bytes (`r12`, `rx05`)
+/// are looked up as one integer (their bytes and length): hashing and
+/// comparing a byte string for every frame line was a ninth of parsing it.
+#[derive(Default)]
+struct ReceiverIds {
+    short: FastMap<u64, usize>,
+    long: FastMap<Vec<u8>, usize>,
+}
+
+impl ReceiverIds {
+    fn short_key(id: &[u8]) -> Option<u64> {
+        (id.len() < 8).then(|| {
+            let bytes = id.iter().enumerate().fold(0u64, |k, (i, &b)| k | u64::from(b) << (8 * i));
+            bytes | (id.len() as u64) << 56
+        })
+    }
+
+    fn insert(&mut self, id: &[u8], rx: usize) {
+        match Self::short_key(id) {
+            Some(k) => self.short.insert(k, rx),
+            None => self.long.insert(id.to_vec(), rx),
+        };
+    }
+
+    fn get(&self, id: &[u8]) -> Option<usize> {
+        match Self::short_key(id) {
+            Some(k) => self.short.get(&k),
+            None => self.long.get(id),
+        }
+        .copied()
+    }
+}
+
 /// One line (without its newline): `None` for blank lines and comments.
-fn parse_line(line: &[u8], ids: &FastMap<Vec<u8>, usize>) -> Option<Result<CaptureRecord, String>> {
+fn parse_line(line: &[u8], ids: &ReceiverIds) -> Option<Result<CaptureRecord, String>> {
     let text = line.trim_ascii();
     if text.is_empty() || text[0] == b'#' {
         return None;
@@ -257,7 +290,7 @@ fn parse_line(line: &[u8], ids: &FastMap<Vec<u8>, usize>) -> Option<Result<Captu
 /// single spaces, in one pass; `None` for anything else, which the general
 /// parser then reads or reports (its word splitting was over a quarter of
 /// the parsing thread's instructions).
-fn plain_frame_line(text: &[u8], ids: &FastMap<Vec<u8>, usize>) -> Option<CaptureRecord> {
+fn plain_frame_line(text: &[u8], ids: &ReceiverIds) -> Option<CaptureRecord> {
     // The words before the frame are a few bytes long, too short for
     // memchr's vector set-up to pay: a plain scan, and the arrival time's
     // width as the writer writes it (`%.6f` of ten-digit seconds) tried
@@ -267,13 +300,13 @@ fn plain_frame_line(text: &[u8], ids: &FastMap<Vec<u8>, usize>) -> Option<Captur
     let arrival = fast_decimal(&text[..first])?;
     let rest = &text[first + 1..];
     let second = space(rest)?;
-    let rx = *ids.get(&rest[..second])?;
+    let rx = ids.get(&rest[..second])?;
     let frame = frame_word(&rest[second + 1..]).ok()?;
     Some(CaptureRecord::Frame(CaptureFrame { arrival, rx, frame }))
 }
 
 /// `ARRIVAL ID <FRAME;`, on bytes: this is the hot path of `run --capture`.
-fn parse_frame_line(text: &[u8], ids: &FastMap<Vec<u8>, usize>) -> Result<CaptureRecord, String> {
+fn parse_frame_line(text: &[u8], ids: &ReceiverIds) -> Result<CaptureRecord, String> {
     let mut words = words(text);
     let first = words.next().unwrap_or_default();
     let arrival: f64 = fast_decimal(first)
@@ -286,7 +319,7 @@ fn parse_frame_line(text: &[u8], ids: &FastMap<Vec<u8>, usize>) -> Result<Captur
             )
         })?;
     let id = words.next().ok_or("frame line without a receiver id")?;
-    let rx = *ids.get(id).ok_or_else(|| format!("undeclared receiver {:?}", String::from_utf8_lossy(id)))?;
+    let rx = ids.get(id).ok_or_else(|| format!("undeclared receiver {:?}", String::from_utf8_lossy(id)))?;
     let token = words.next().ok_or("frame line without a frame")?;
     if words.next().is_some() {
         return Err("trailing text after the frame".into());
@@ -458,6 +491,28 @@ mod tests {
     use super::*;
 
     #[test]
+    fn receiver_ids_of_every_length_find_their_own_receiver() {
+        // Short ids are packed into one integer with their length: ids that
+        // differ only by trailing NULs or by length must not meet.
+        let ids: Vec<Vec<u8>> = (0..=12)
+            .flat_map(|n| [vec![b'r'; n], [vec![b'r'; n.saturating_sub(1)], vec![0]].concat()])
+            .chain([b"r1".to_vec(), b"r10".to_vec(), b"r1\0".to_vec(), b"rx22".to_vec(), b"abcdefg".to_vec()])
+            .collect::<std::collections::BTreeSet<_>>()
+            .into_iter()
+            .collect();
+        let mut map = ReceiverIds::default();
+        for (rx, id) in ids.iter().enumerate() {
+            map.insert(id, rx);
+        }
+        for (rx, id) in ids.iter().enumerate() {
+            assert_eq!(map.get(id), Some(rx), "{id:?}");
+        }
+        for unknown in [&b"r2"[..], b"abcdefgh", b"x", b"rrrrrrrrrrrrrrrr"] {
+            assert_eq!(map.get(unknown), None, "{unknown:?}");
+        }
+    }
+
+    #[test]
     fn fast_decimals_are_the_standard_parser_s_doubles() {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
@@ -494,7 +549,9 @@ mod tests {
     fn the_plain_line_path_reads_what_the_general_parser_reads_and_nothing_else() {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
-        let ids: FastMap<Vec<u8>, usize> = [(b"r1".to_vec(), 0), (b"rx22".to_vec(), 1)].into_iter().collect();
+        let mut ids = ReceiverIds::default();
+        ids.insert(b"r1", 0);
+        ids.insert(b"rx22", 1);
         let good = "1700000000.023698 r1 <000F53FCF111A98D4004845881F13FE149670FB5F4;";
         let alphabet = b" \t.;<0123456789abcdefABCDEFrx*@%-+eG";
         let (mut plain, mut rejected) = (0, 0);
