@@ -59,7 +59,10 @@ pub fn parse_avr_token(token: &[u8]) -> Option<RawFrame> {
     let mut bytes = [0u8; 6 + 1 + 14];
     let n = parse_hex_into(rest, &mut bytes[..ts_len + sig_len + 14])? - ts_len - sig_len;
     let mut ts = [0u8; 8];
-    ts[2..2 + ts_len].copy_from_slice(&bytes[..ts_len]);
+    if ts_len == 6 {
+        // Fixed length: a copy of a variable one was a call to memcpy.
+        ts[2..].copy_from_slice(&bytes[..6]);
+    }
     let sig = if sig_len > 0 { bytes[ts_len] } else { 0 };
     RawFrame::new(&bytes[ts_len + sig_len..][..n], u64::from_be_bytes(ts), sig)
 }

@@ -35,11 +35,15 @@ pub struct RawFrame {
 impl RawFrame {
     /// Builds a frame from 2 (Mode A/C), 7 (short) or 14 (long) bytes.
     pub fn new(bytes: &[u8], timestamp: u64, signal: u8) -> Option<Self> {
-        if !matches!(bytes.len(), 2 | 7 | 14) {
-            return None;
-        }
+        // A copy of a known length per case: one of the slice's length was a
+        // call to memcpy for every frame.
         let mut data = [0u8; 14];
-        data[..bytes.len()].copy_from_slice(bytes);
+        match bytes.len() {
+            2 => data[..2].copy_from_slice(bytes),
+            7 => data[..7].copy_from_slice(bytes),
+            14 => data.copy_from_slice(bytes),
+            _ => return None,
+        }
         Some(RawFrame { timestamp, signal, len: bytes.len() as u8, data })
     }
 
