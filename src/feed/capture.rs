@@ -355,20 +355,29 @@ fn words(text: &[u8]) -> impl Iterator<Item = &[u8]> {
 /// doubles and their quotient is the correctly rounded value, the same
 /// double `str::parse` gives (Clinger's fast path). Anything else (signs,
 /// exponents, more digits) is `None`, for the full parser.
+///
+/// The writer's own form, ten digits, a dot and six (`%.6f` of Unix
+/// seconds), is read inline as two groups of eight, the dot stepped over;
+/// anything else goes to the general path, out of line so that the common
+/// case pays for neither a call nor its registers.
+#[inline]
 fn fast_decimal(s: &[u8]) -> Option<f64> {
-    static POW10: [f64; 23] = [
-        1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16, 1e17,
-        1e18, 1e19, 1e20, 1e21, 1e22,
-    ];
-    // The writer's own form first, ten digits, a dot and six (`%.6f` of Unix
-    // seconds): two groups of eight, the dot stepped over, no search for it.
     if s.len() == 17 && s[10] == b'.' {
         let high = digits8(u64::from_le_bytes(s[..8].try_into().expect("eight bytes")))?;
         let tail = u64::from_le_bytes(s[9..].try_into().expect("eight bytes"));
         let low = (tail & !0xFFFF) | u64::from(u16::from_le_bytes([s[8], s[9]]));
         let m = high * 100_000_000 + digits8(low)?;
-        return (m <= 1 << 53).then(|| m as f64 / POW10[6]);
+        return (m <= 1 << 53).then(|| m as f64 / 1e6);
     }
+    fast_decimal_general(s)
+}
+
+#[inline(never)]
+fn fast_decimal_general(s: &[u8]) -> Option<f64> {
+    static POW10: [f64; 23] = [
+        1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16, 1e17,
+        1e18, 1e19, 1e20, 1e21, 1e22,
+    ];
     let dot = s.iter().position(|&b| b == b'.');
     let (int_end, frac_start) = dot.map_or((s.len(), s.len()), |d| (d, d + 1));
     let frac_len = s.len() - frac_start;
