@@ -114,9 +114,7 @@ pub fn assess(cfg: &ConflictConfig, a: &Kinematics, b: &Kinematics) -> Option<Co
     let lvl = level(a.alt_ft.min(b.alt_ft));
     let (dx, dy) = (b.pos[0] - a.pos[0], b.pos[1] - a.pos[1]);
     let (vx, vy) = (b.vel[0] - a.vel[0], b.vel[1] - a.vel[1]);
-    let zthr = lvl.zthr_ft * FT_TO_M;
-    let vertical = dz.abs() < zthr || (dz * vz < 0.0 && (dz.abs() - zthr) / vz.abs() < lvl.tau_s);
-    if !vertical {
+    if !(within(lvl.zthr_ft) || closing(lvl.zthr_ft, lvl.tau_s)) {
         return None;
     }
     let r = dx.hypot(dy);

@@ -128,7 +128,7 @@ pub fn track_record(r: &TrackReport) -> TrackRecord<'_> {
 
 /// `type: "alert"` records: `kind` says which.
 pub fn alert_record(a: &Alert) -> serde_json::Value {
-    let hex = |addr: u32| format!("{addr:06X}");
+    let hex = Hex::addr;
     match *a {
         Alert::AdsbSuspect { t, addr, id, suspect, offset_m, nis } => serde_json::json!({
             "type": "alert", "kind": "adsb_suspect", "t": round(t, 1e6), "hex": hex(addr), "id": id,

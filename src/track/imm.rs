@@ -85,15 +85,10 @@ impl Imm {
         // every 336-byte Gaussian once more), into zeros: a copy of the
         // filters to overwrite cost a sixth more.
         let zero = Gaussian { x: Vector6::zeros(), p: Matrix6::zeros() };
-        // All-zero bytes written as such when the models fit inline: n
-        // clones of `zero` were n calls to memcpy.
-        let mut predicted: PerModel<Gaussian> = if n <= 4 {
-            let mut inline = PerModel::from_buf([zero; 4]);
-            inline.truncate(n);
-            inline
-        } else {
-            smallvec::smallvec![zero; n]
-        };
+        // The inline slots written as zero bytes, then cut or grown to n:
+        // n clones of `zero` were n calls to memcpy.
+        let mut predicted = PerModel::from_buf([zero; 4]);
+        predicted.resize(n, zero);
         for (j, ((cj, model), out)) in c.iter().zip(&self.spec.models).zip(predicted.iter_mut()).enumerate() {
             let w: PerModel<f64> = (0..n).map(|i| tr[(i, j)] * self.mu[i] / cj.max(1e-300)).collect();
             let mixed = combine(&self.filters, &w);
