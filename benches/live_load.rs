@@ -18,6 +18,10 @@
 //! plays more of the world (20 s by default): at 8x and above a run's p99
 //! rests on one or two stalls, and a longer run weighs them fairly.
 //! `FUSE1090_LOAD_BIN=path/to/fuse1090` measures another build's daemon.
+//! The daemon runs with `realtime_priority = 10` (round-robin realtime
+//! scheduling; this process, the load generator and the subscriber stay
+//! time-shared), `FUSE1090_LOAD_RT=0` runs it time-shared; the last column
+//! says how it ran (`rr10`, or `ts` when the system refused realtime).
 
 use std::net::UdpSocket;
 use std::path::Path;
@@ -82,7 +86,7 @@ fn main() {
         frames as f64 / seconds
     );
     println!(
-        "{:>6} {:>12} {:>12} {:>9} {:>6} {:>8} {:>16} {:>16} {:>18}",
+        "{:>6} {:>12} {:>12} {:>9} {:>6} {:>8} {:>16} {:>16} {:>18} {:>6}",
         "speed",
         "offered/s",
         "processed/s",
@@ -91,7 +95,8 @@ fn main() {
         "peak MB",
         "adsb p50/p99 ms",
         "mlat p50/p99 ms",
-        "adsb n / late p99"
+        "adsb n / late p99",
+        "sched"
     );
     // FUSE1090_LOAD_SPEEDS="1,2" runs only those speeds.
     let speeds: Vec<f64> = std::env::var("FUSE1090_LOAD_SPEEDS")
@@ -102,6 +107,8 @@ fn main() {
     // the load generator stays this build's).
     let daemon_bin =
         std::env::var("FUSE1090_LOAD_BIN").unwrap_or_else(|_| env!("CARGO_BIN_EXE_fuse1090").into());
+    let rt: u8 = std::env::var("FUSE1090_LOAD_RT").ok().and_then(|v| v.parse().ok()).unwrap_or(10);
+    println!("daemon: {daemon_bin}, realtime_priority = {rt}");
     for speed in speeds {
         let sub = UdpSocket::bind("127.0.0.1:0").unwrap();
         fuse1090::live::stamp::enable(&sub).unwrap();
@@ -109,8 +116,9 @@ fn main() {
         // found free can still be a UDP socket's, the subscriber's among them).
         let port = UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
         let mut cfg = format!(
-            "[service]\nstats_interval_s = 1000.0\nqueue_frames = 262144\n\n[[input]]\nkind = \"udp\"\naddress = \"127.0.0.1:{port}\"\n\n[[output]]\nkind = \"udp\"\naddress = \"{}\"\nformat = \"json\"\n\n",
-            sub.local_addr().unwrap()
+            "[service]\nstats_interval_s = 1000.0\nqueue_frames = 262144\nrealtime_priority = {rt}\n\n[[input]]\nkind = \"udp\"\naddress = \"127.0.0.1:{port}\"\n\n[[output]]\nkind = \"udp\"\naddress = \"{}\"\nformat = \"json\"\n\n",
+            sub.local_addr().unwrap(),
+            rt = rt
         );
         for (i, r) in rxs.iter().enumerate() {
             cfg += &format!(
@@ -218,8 +226,12 @@ fn main() {
         let processed = num_after("stats: frames ");
         let dropped = num_after("queue drops ") + (sent - processed).max(0.0) - num_after("queue drops ");
         let span = seconds / speed;
+        // How the daemon really ran: it falls back to time sharing, with a
+        // warning, where realtime scheduling is not permitted.
+        let sched =
+            if text.contains("realtime round-robin scheduling") { format!("rr{rt}") } else { "ts".into() };
         println!(
-            "{:>6} {:>12.0} {:>12.0} {:>9.0} {:>5.0}% {:>8.0} {:>7.1}/{:<8.1} {:>7.0}/{:<8.0} {:>8}/{:<9.1}",
+            "{:>6} {:>12.0} {:>12.0} {:>9.0} {:>5.0}% {:>8.0} {:>7.1}/{:<8.1} {:>7.0}/{:<8.0} {:>8}/{:<9.1} {:>6}",
             speed,
             sent / span,
             processed / span,
@@ -232,6 +244,7 @@ fn main() {
             pct(&mut mlat, 0.99),
             adsb.len(),
             pct(&mut adsb_late, 0.99),
+            sched,
         );
     }
 }

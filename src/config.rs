@@ -115,6 +115,8 @@ mod tests {
         let text = r#"
 [core]
 group_wait_s = 9
+[service]
+realtime_priority = 100
 [[receiver]]
 id = "a"
 lat = 95.0
@@ -132,6 +134,7 @@ format = "json"
         let e = Config::parse(text, "bad.toml").unwrap_err().to_string();
         for needle in [
             "bad.toml: [core] group_wait_s",
+            "[service] realtime_priority = 100 must be in 0..=99",
             "[[receiver]] 1 (a): position out of range",
             "[[receiver]] 1 (a): clock",
             "[[input]] 1: receiver \"nobody\" is not declared",

@@ -28,6 +28,10 @@ pub struct ServiceConfig {
     /// Demo: replay this capture into our own inputs at start (empty: off), at this speed.
     pub demo_capture: String,
     pub demo_speed: f64,
+    /// Realtime round-robin priority (1-99) for the service's threads, so
+    /// other processes on the machine cannot delay a frame's way through;
+    /// 0: ordinary time sharing. Read at start.
+    pub realtime_priority: u8,
 }
 
 impl Default for ServiceConfig {
@@ -43,6 +47,7 @@ impl Default for ServiceConfig {
             queue_frames: 65_536,
             demo_capture: String::new(),
             demo_speed: 1.0,
+            realtime_priority: 0,
         }
     }
 }
@@ -181,6 +186,9 @@ pub fn validate(
     }
     if service.queue_frames == 0 {
         errs.push("[service] queue_frames must be positive".into());
+    }
+    if service.realtime_priority > 99 {
+        errs.push(format!("[service] realtime_priority = {} must be in 0..=99", service.realtime_priority));
     }
     if !(service.demo_speed > 0.0 && service.demo_speed.is_finite()) {
         errs.push(format!("[service] demo_speed = {} must be positive", service.demo_speed));
