@@ -263,9 +263,8 @@ impl Mlat {
         let partner = match r.gps_partner {
             Some((g, at)) if now - at < 10.0 => Some(g),
             _ => {
-                let best = (0..self.rxs.len())
-                    .filter(|&g| self.rxs[g].clock == ClockKind::Gps)
-                    .filter_map(|g| self.sync.edge(rx, g, local, now).map(|(_, v)| (g, v)))
+                let best = (self.sync.gps_peers(rx).iter())
+                    .filter_map(|&g| self.sync.edge(rx, g, local, now).map(|(_, v)| (g, v)))
                     .min_by(|a, b| a.1.total_cmp(&b.1))
                     .map(|(g, _)| g);
                 self.rxs[rx].gps_partner = best.map(|g| (g, now));
