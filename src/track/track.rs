@@ -272,16 +272,22 @@ pub fn transfer(g: &Gaussian, from: &Plane, to: &Plane) -> Gaussian {
         return *g;
     }
     let r = from.rotation_to(to) * from.scale_to(to);
-    let mut t = Matrix6::zeros();
-    for b in 0..3 {
-        t.fixed_view_mut::<2, 2>(2 * b, 2 * b).copy_from(&r);
+    // The transform is r on each (east, north) pair of the state, so the
+    // covariance moves block by block (r P_ab r'): a sixth of the products of
+    // two full 6 x 6 ones, with the same terms summed in the same order.
+    let mut x = Vector6::zeros();
+    let mut p = Matrix6::zeros();
+    for a in 0..3 {
+        x.fixed_rows_mut::<2>(2 * a).copy_from(&(r * g.x.fixed_rows::<2>(2 * a)));
+        for b in 0..3 {
+            let block = r * g.p.fixed_view::<2, 2>(2 * a, 2 * b) * r.transpose();
+            p.fixed_view_mut::<2, 2>(2 * a, 2 * b).copy_from(&block);
+        }
     }
-    let mut x = t * g.x;
     let (lat, lon) = from.to_geodetic(g.x[0], g.x[1]);
     let en = to.to_en(lat, lon);
     x[0] = en[0];
     x[1] = en[1];
-    let p = t * g.p * t.transpose();
     Gaussian { x, p: (p + p.transpose()) * 0.5 }
 }
 
