@@ -186,23 +186,32 @@ impl Imm {
         nis: impl Fn(&Gaussian) -> f64,
     ) -> Option<Step> {
         let n = self.spec.models.len();
-        let mut lik = PerModel::<f64>::with_capacity(n);
+        // (NIS, likelihood normaliser, prior probability) per model.
+        let mut lik = PerModel::<(f64, f64, f64)>::with_capacity(n);
         // Each posterior written where it stays: collecting them and moving
         // the list into the filters copied 1.3 KB a step. Nothing reads the
         // filters before they are all written (`p` holds the predictions).
         for ((pred, cj), f) in p.predicted.iter().zip(&p.c).zip(self.filters.iter_mut()) {
             let u = update(pred)?;
             *f = u.post;
-            lik.push(u.log_likelihood + cj.max(1e-300).ln());
+            lik.push((u.nis, u.norm, cj.max(1e-300)));
         }
-        // Model probabilities by log-sum-exp: a measurement far from every
-        // model would underflow plain likelihoods to zero.
-        let top = lik.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        if !top.is_finite() {
+        // Model probabilities c_j exp(-nis_j / 2) / norm_j, each exponent
+        // taken relative to the smallest NIS: plain likelihoods would
+        // underflow to zero for a measurement far from every model, and this
+        // needs no logarithms (two per model were 1% of a run).
+        let least = lik.iter().map(|l| l.0).fold(f64::INFINITY, f64::min);
+        if !least.is_finite() {
             return None;
         }
-        let w: PerModel<f64> = lik.iter().map(|l| (l - top).exp()).collect();
+        // The best fit's weight is at least 1e-300 / norm, far from zero for
+        // any covariance a track can have.
+        let w: PerModel<f64> =
+            lik.iter().map(|&(nis, norm, c)| (-0.5 * (nis - least)).exp() * c / norm).collect();
         let total: f64 = w.iter().sum();
+        if !(total > 0.0 && total.is_finite()) {
+            return None;
+        }
         let mu: PerModel<f64> = w.iter().map(|x| x / total).collect();
         // NIS of the combined prediction (the track's own consistency check).
         let nis = nis(&p.combined());
@@ -277,6 +286,54 @@ mod tests {
                 let got = prep.predicted[j];
                 assert!((got.x - x).amax() < 1e-9 * x.amax(), "model {j}: {} vs {}", got.x, x);
                 assert!((got.p - p).amax() < 1e-9 * p.amax(), "model {j}: {} vs {}", got.p, p);
+            }
+        }
+    }
+
+    /// Model probabilities after an update against log-sum-exp over each
+    /// model's log-likelihood and prior, where plain likelihoods underflow
+    /// too (a measurement kilometres from every model) and for a model the
+    /// transition matrix makes impossible.
+    #[test]
+    fn model_probabilities_are_the_normalised_likelihoods_however_far_the_measurement() {
+        let models = vec![
+            MotionModel::ConstantVelocity { q: 0.5 },
+            MotionModel::CoordinatedTurn { omega: 0.05, q: 0.5 },
+            MotionModel::CoordinatedTurn { omega: -0.05, q: 0.5 },
+        ];
+        let filter = |k: f64| Gaussian {
+            x: Vector6::new(30.0 * k, 10.0 * k, 200.0 - k, 5.0 * k, 0.1 * k, -0.2),
+            p: Matrix6::from_diagonal(&Vector6::new(50.0, 60.0, 4.0, 5.0, 0.1, 0.1)),
+        };
+        // Nothing switches into the second model.
+        let closed = DMatrix::from_row_slice(3, 3, &[0.9, 0.0, 0.1, 0.1, 0.0, 0.9, 0.2, 0.0, 0.8]);
+        for (transition, offset) in [(Imm::sticky(3, 0.9), 5.0), (Imm::sticky(3, 0.9), 3e4), (closed, 40.0)] {
+            let mut imm = Imm::new(models.clone(), transition, filter(0.0));
+            imm.filters = smallvec::smallvec![filter(0.0), filter(1.0), filter(2.0)];
+            imm.mu = smallvec::smallvec![0.5, 0.3, 0.2];
+            let prep = imm.prepare(1.0);
+            let target = prep.predicted[1].x;
+            let m = PosMeasurement {
+                z: Vector2::new(target[0] + offset, target[1]),
+                r: Matrix2::identity() * 25.0,
+            }
+            .linear();
+            let logs: Vec<f64> = (0..3)
+                .map(|j| {
+                    let u = prep.predicted[j].update_linear(&m).unwrap();
+                    u.log_likelihood() + prep.c[j].max(1e-300).ln()
+                })
+                .collect();
+            let top = logs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let total: f64 = logs.iter().map(|l| (l - top).exp()).sum();
+            imm.update(&prep, &m).unwrap();
+            for (j, l) in logs.iter().enumerate() {
+                let want = (l - top).exp() / total;
+                assert!(
+                    (imm.mu[j] - want).abs() < 1e-12,
+                    "offset {offset}, model {j}: {} vs {want}",
+                    imm.mu[j]
+                );
             }
         }
     }

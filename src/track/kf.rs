@@ -61,9 +61,18 @@ pub struct Updated {
     pub post: Gaussian,
     /// Normalised innovation squared (chi-square with M dof when consistent).
     pub nis: f64,
-    /// Logarithm of the measurement likelihood N(innovation; 0, S) (the
-    /// likelihood itself underflows for a far-off measurement).
-    pub log_likelihood: f64,
+    /// The likelihood's normaliser, (2 pi)^(M/2) sqrt(det S): the measurement
+    /// likelihood N(innovation; 0, S) is exp(-nis / 2) / `norm`. Kept apart
+    /// because the likelihood itself underflows for a far-off measurement,
+    /// and the IMM compares models without taking logarithms.
+    pub norm: f64,
+}
+
+impl Updated {
+    /// Logarithm of the measurement likelihood.
+    pub fn log_likelihood(&self) -> f64 {
+        -0.5 * self.nis - self.norm.ln()
+    }
 }
 
 /// Position rows of the state.
@@ -105,13 +114,12 @@ impl Gaussian {
         let k = pht * s_inv;
         let p = self.p - k * pht.transpose();
         let nis = (nu.transpose() * s_inv * nu)[0];
-        let norm = (2.0 * std::f64::consts::PI).powi(M as i32 / 2)
+        let two_pi = (2.0 * std::f64::consts::PI).powi(M as i32 / 2)
             * if M % 2 == 1 { (2.0 * std::f64::consts::PI).sqrt() } else { 1.0 };
-        let log_likelihood = -0.5 * nis - (norm * det.sqrt()).ln();
         Some(Updated {
             post: Gaussian { x: self.x + k * nu, p: (p + p.transpose()) * 0.5 },
             nis,
-            log_likelihood,
+            norm: two_pi * det.sqrt(),
         })
     }
 
@@ -143,7 +151,8 @@ mod tests {
         assert!((u.post.p[(0, 0)] - 50.0).abs() < 1e-9);
         assert!((u.nis - 0.5).abs() < 1e-12);
         assert!(
-            (u.log_likelihood.exp() - (-0.25f64).exp() / (2.0 * std::f64::consts::PI * 200.0)).abs() < 1e-12
+            (u.log_likelihood().exp() - (-0.25f64).exp() / (2.0 * std::f64::consts::PI * 200.0)).abs()
+                < 1e-12
         );
         assert!(u.post.healthy());
         let bad = PosMeasurement { z: Vector2::zeros(), r: -Matrix2::identity() * 1e3 };
