@@ -258,16 +258,21 @@ mod tests {
     use super::*;
     use nalgebra::{Matrix2, Vector2};
 
+    /// Straight flight and turns either way at about 3 deg/s.
+    fn straight_and_turns() -> Vec<MotionModel> {
+        vec![
+            MotionModel::ConstantVelocity { q: 0.5 },
+            MotionModel::CoordinatedTurn { omega: 0.05, q: 0.5 },
+            MotionModel::CoordinatedTurn { omega: -0.05, q: 0.5 },
+        ]
+    }
+
     /// The mixing's shortcuts (around the combined mean; one pass per model
     /// for a matrix with uniform columns) against the textbook: each model's
     /// weights applied to the filters, moment-matched, predicted.
     #[test]
     fn mixing_equals_the_textbook_mixture_for_any_transition_matrix() {
-        let models = vec![
-            MotionModel::ConstantVelocity { q: 0.5 },
-            MotionModel::CoordinatedTurn { omega: 0.05, q: 0.5 },
-            MotionModel::CoordinatedTurn { omega: -0.05, q: 0.5 },
-        ];
+        let models = straight_and_turns();
         let filter = |k: f64| Gaussian {
             x: Vector6::new(1e4 + 30.0 * k, -2e4 + 10.0 * k, 200.0 - k, 5.0 * k, 0.1 * k, -0.2),
             p: Matrix6::from_fn(|r, c| if r == c { 50.0 + 10.0 * k * (r + 1) as f64 } else { 0.3 * k }),
@@ -296,11 +301,7 @@ mod tests {
     /// transition matrix makes impossible.
     #[test]
     fn model_probabilities_are_the_normalised_likelihoods_however_far_the_measurement() {
-        let models = vec![
-            MotionModel::ConstantVelocity { q: 0.5 },
-            MotionModel::CoordinatedTurn { omega: 0.05, q: 0.5 },
-            MotionModel::CoordinatedTurn { omega: -0.05, q: 0.5 },
-        ];
+        let models = straight_and_turns();
         let filter = |k: f64| Gaussian {
             x: Vector6::new(30.0 * k, 10.0 * k, 200.0 - k, 5.0 * k, 0.1 * k, -0.2),
             p: Matrix6::from_diagonal(&Vector6::new(50.0, 60.0, 4.0, 5.0, 0.1, 0.1)),
