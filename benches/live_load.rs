@@ -117,8 +117,7 @@ fn main() {
         let port = UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
         let mut cfg = format!(
             "[service]\nstats_interval_s = 1000.0\nqueue_frames = 262144\nrealtime_priority = {rt}\n\n[[input]]\nkind = \"udp\"\naddress = \"127.0.0.1:{port}\"\n\n[[output]]\nkind = \"udp\"\naddress = \"{}\"\nformat = \"json\"\n\n",
-            sub.local_addr().unwrap(),
-            rt = rt
+            sub.local_addr().unwrap()
         );
         for (i, r) in rxs.iter().enumerate() {
             cfg += &format!(

@@ -90,9 +90,9 @@ pub fn run(config_path: &Path) -> Result<()> {
 /// hour). Threads block when they have no work, so the service takes the
 /// CPU its frames need and no more (though more than time-shared: each
 /// wake-up is served at once, so batches are smaller), and the kernel's
-/// realtime throttling keeps a share for everything else. (Not reset on fork: to the kernel a new thread is a fork,
-/// and the threads started afterwards would lose it; the service starts no
-/// processes.)
+/// realtime throttling keeps a share for everything else. Not reset on
+/// fork: to the kernel a new thread is a fork, and the threads started
+/// afterwards would lose it (the service starts no processes).
 fn realtime(priority: u8) -> std::io::Result<()> {
     #[cfg(target_os = "linux")]
     {

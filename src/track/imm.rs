@@ -98,7 +98,7 @@ impl Imm {
         // configured default), sum_i tr_ij mu_i A_i = r_j B + (tr_jj - r_j)
         // mu_j A_j with B = sum_i mu_i A_i the same for every j: each mixture
         // is then one pass over two matrices instead of n (the mixtures were
-        // a fifth of a run's instructions). d_i and m_j are the models'
+        // two fifths of this preparation). d_i and m_j are the models'
         // small disagreements, so subtracting m_j m_j' loses nothing.
         let xr = self.mean();
         let mut spread = PerModel::<(Vector6<f64>, Matrix6<f64>)>::new();

@@ -114,12 +114,12 @@ impl Gaussian {
         let k = pht * s_inv;
         let p = self.p - k * pht.transpose();
         let nis = (nu.transpose() * s_inv * nu)[0];
-        let two_pi = (2.0 * std::f64::consts::PI).powi(M as i32 / 2)
+        let two_pi_pow = (2.0 * std::f64::consts::PI).powi(M as i32 / 2)
             * if M % 2 == 1 { (2.0 * std::f64::consts::PI).sqrt() } else { 1.0 };
         Some(Updated {
             post: Gaussian { x: self.x + k * nu, p: (p + p.transpose()) * 0.5 },
             nis,
-            norm: two_pi * det.sqrt(),
+            norm: two_pi_pow * det.sqrt(),
         })
     }
 

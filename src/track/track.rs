@@ -273,8 +273,8 @@ pub fn transfer(g: &Gaussian, from: &Plane, to: &Plane) -> Gaussian {
     }
     let r = from.rotation_to(to) * from.scale_to(to);
     // The transform is r on each (east, north) pair of the state, so the
-    // covariance moves block by block (r P_ab r'): a sixth of the products of
-    // two full 6 x 6 ones, with the same terms summed in the same order.
+    // covariance moves block by block (r P_ab r'): a third of the
+    // multiplications of two full 6 x 6 products, which only add zeros.
     let mut x = Vector6::zeros();
     let mut p = Matrix6::zeros();
     for a in 0..3 {
