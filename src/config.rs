@@ -123,6 +123,7 @@ lat = 95.0
 lon = 1.0
 alt_m = 0.0
 clock = "atomic"
+beast_id = "12345"
 [[input]]
 kind = "beast_tcp_client"
 address = "127.0.0.1:30005"
@@ -137,6 +138,7 @@ format = "json"
             "[service] realtime_priority = 100 must be in 0..=99",
             "[[receiver]] 1 (a): position out of range",
             "[[receiver]] 1 (a): clock",
+            "[[receiver]] 1 (a): beast_id = \"12345\": 16 hex digits or a UUID",
             "[[input]] 1: receiver \"nobody\" is not declared",
             "[[output]] 1: udp needs address",
         ] {

@@ -224,6 +224,28 @@ impl FrameParser for BeastParser {
     }
 }
 
+/// Encodes readsb's receiver id frame (0xe3): the 8-byte id of the
+/// receiver whose frames follow (`replay` names a receiver with it).
+pub fn encode_receiver_id(id: u64, out: &mut Vec<u8>) {
+    encode_body(0xe3, &id.to_be_bytes(), out);
+}
+
+/// Encodes readsb's UUID frame (0xe4): the feeder's 36-character UUID.
+pub fn encode_receiver_uuid(uuid: &[u8; 36], out: &mut Vec<u8>) {
+    encode_body(0xe4, uuid, out);
+}
+
+fn encode_body(ty: u8, body: &[u8], out: &mut Vec<u8>) {
+    out.push(ESC);
+    out.push(ty);
+    for &b in body {
+        out.push(b);
+        if b == ESC {
+            out.push(ESC);
+        }
+    }
+}
+
 /// Encodes a frame as Beast binary (used by `replay`, tests and benchmarks).
 pub fn encode(frame: &RawFrame, out: &mut Vec<u8>) {
     out.push(ESC);
@@ -356,6 +378,16 @@ mod tests {
                 assert!(!contains_esc(&b));
             }
         }
+    }
+
+    #[test]
+    fn receiver_id_and_uuid_frames_round_trip_through_the_encoders() {
+        let mut wire = Vec::new();
+        encode_receiver_id(0x1a1a_0203_0405_061a, &mut wire);
+        let uuid = *b"0f1e2d3c-4b5a-6978-8796-a5b4c3d2e1f0";
+        encode_receiver_uuid(&uuid, &mut wire);
+        let out = collect(&mut BeastParser::new(), &[&wire]);
+        assert_eq!(out, vec![FeedEvent::ReceiverId(0x1a1a_0203_0405_061a), FeedEvent::ReceiverUuid(uuid)]);
     }
 
     #[test]

@@ -65,9 +65,64 @@ pub struct ReceiverConfig {
     /// Source address that identifies it on TCP-server and UDP inputs.
     #[serde(default)]
     pub source: Option<IpAddr>,
+    /// What names it on TCP-server inputs when its address does not (a
+    /// receiver behind a changing or shared address): readsb's receiver id
+    /// frame (0xe3), as 16 hex digits, or its UUID frame (0xe4), as the
+    /// 36-character UUID.
+    #[serde(default)]
+    pub beast_id: Option<String>,
     /// Most frames per second accepted from it; more are dropped and counted (0: no limit).
     #[serde(default)]
     pub max_rate: f64,
+}
+
+/// A receiver's name in its Beast stream (readsb's 0xe3 or 0xe4 frame).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BeastId {
+    Id(u64),
+    Uuid([u8; 36]),
+}
+
+impl BeastId {
+    /// 16 hex digits (0xe3) or a 36-character UUID (0xe4), any case.
+    pub fn parse(text: &str) -> Option<BeastId> {
+        match text.len() {
+            16 => u64::from_str_radix(text, 16).ok().map(BeastId::Id),
+            36 if text.bytes().enumerate().all(|(i, b)| {
+                if matches!(i, 8 | 13 | 18 | 23) {
+                    b == b'-'
+                } else {
+                    b.is_ascii_hexdigit()
+                }
+            }) =>
+            {
+                let mut uuid = [0u8; 36];
+                uuid.copy_from_slice(text.to_ascii_lowercase().as_bytes());
+                Some(BeastId::Uuid(uuid))
+            }
+            _ => None,
+        }
+    }
+
+    /// The name a receiver id or UUID frame carries, if it is one.
+    pub fn of(ev: &crate::feed::FeedEvent) -> Option<BeastId> {
+        match ev {
+            crate::feed::FeedEvent::ReceiverId(id) => Some(BeastId::Id(*id)),
+            crate::feed::FeedEvent::ReceiverUuid(u) => {
+                Some(BeastId::Uuid(u.to_ascii_lowercase().try_into().ok()?))
+            }
+            _ => None,
+        }
+    }
+}
+
+impl std::fmt::Display for BeastId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            BeastId::Id(id) => write!(f, "{id:016x}"),
+            BeastId::Uuid(u) => write!(f, "{}", String::from_utf8_lossy(u)),
+        }
+    }
 }
 
 impl ReceiverConfig {
@@ -99,7 +154,8 @@ pub struct InputConfig {
     #[serde(default)]
     pub receiver: Option<String>,
     /// beast_tcp_server and udp: the receivers allowed to send here (each
-    /// recognised by its `source`); empty: any receiver with a source.
+    /// recognised by its `source`, or on a TCP server by its `beast_id`);
+    /// empty: any receiver with either.
     #[serde(default)]
     pub receivers: Vec<String>,
     /// udp: "beast" or "avr".
@@ -124,7 +180,10 @@ impl InputConfig {
     pub fn takes(&self, r: &ReceiverConfig) -> bool {
         match &self.receiver {
             Some(id) => *id == r.id,
-            None => r.source.is_some() && (self.receivers.is_empty() || self.receivers.contains(&r.id)),
+            None => {
+                (r.source.is_some() || r.beast_id.is_some())
+                    && (self.receivers.is_empty() || self.receivers.contains(&r.id))
+            }
         }
     }
 }
@@ -210,6 +269,19 @@ pub fn validate(
         if let Some(s) = r.source {
             if receivers[..i].iter().any(|o| o.source == Some(s)) {
                 errs.push(format!("{at}: source {s} used twice"));
+            }
+        }
+        if let Some(b) = &r.beast_id {
+            match BeastId::parse(b) {
+                None => errs.push(format!("{at}: beast_id = {b:?}: 16 hex digits or a UUID")),
+                Some(id) => {
+                    if receivers[..i]
+                        .iter()
+                        .any(|o| o.beast_id.as_deref().and_then(BeastId::parse) == Some(id))
+                    {
+                        errs.push(format!("{at}: beast_id {b} used twice"));
+                    }
+                }
             }
         }
         if !(r.max_rate >= 0.0 && r.max_rate.is_finite()) {

@@ -1,6 +1,7 @@
 //! Input tasks: Beast TCP client (reconnecting with capped exponential
 //! backoff and jitter), Beast TCP server (senders identified by their
-//! configured source address, unknown ones refused and counted, one
+//! configured source address, or by readsb's receiver id or UUID frame
+//! within their first seconds, unknown ones refused and counted, one
 //! connection per receiver), and UDP datagrams of Beast or AVR (large
 //! receive buffer, several datagrams per system call, per-receiver rate
 //! limit).
@@ -18,7 +19,7 @@ use std::collections::HashMap;
 use std::net::IpAddr;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::mpsc::{SyncSender, TrySendError};
-use std::sync::{Arc, RwLock};
+use std::sync::{Arc, Mutex, RwLock};
 use std::time::Duration;
 
 use rand::Rng;
@@ -26,7 +27,7 @@ use socket2::{Domain, Protocol, Socket, Type};
 use tokio::io::Interest;
 use tokio::net::{TcpListener, TcpStream, UdpSocket};
 
-use super::config::{InputConfig, InputKind, ReceiverConfig};
+use super::config::{BeastId, InputConfig, InputKind, ReceiverConfig};
 use super::ToCore;
 use crate::feed::{parser_for, FeedEvent, FrameParser, InputFormat, RawFrame};
 
@@ -74,6 +75,21 @@ impl Registry {
             .expect("registry")
             .iter()
             .position(|(r, _)| r.source == Some(ip) && input.takes(r))
+    }
+
+    /// The receiver a readsb receiver id or UUID frame names, if this input takes it.
+    fn by_beast_id(&self, id: BeastId, input: &InputConfig) -> Option<usize> {
+        self.receivers
+            .read()
+            .expect("registry")
+            .iter()
+            .position(|(r, _)| r.beast_id.as_deref().and_then(BeastId::parse) == Some(id) && input.takes(r))
+    }
+
+    /// Whether a sender this input does not know by address may still name
+    /// itself (a receiver it takes has a `beast_id`).
+    fn names_itself(&self, input: &InputConfig) -> bool {
+        self.receivers.read().expect("registry").iter().any(|(r, _)| r.beast_id.is_some() && input.takes(r))
     }
 
     fn counters(&self, rx: usize) -> Arc<RxCounters> {
@@ -159,6 +175,7 @@ fn frames_of(parser: &mut dyn FrameParser, bytes: &[u8], datagram: bool, c: &RxC
 /// `idle_timeout_s`; returns why.
 async fn stream(
     sock: TcpStream,
+    mut parser: Box<dyn FrameParser + Send>,
     input: &InputConfig,
     tx: &SyncSender<ToCore>,
     reg: &Registry,
@@ -176,7 +193,6 @@ async fn stream(
     let _ = super::stamp::enable(&sock);
     let idle = (input.idle_timeout_s > 0.0).then(|| Duration::from_secs_f64(input.idle_timeout_s));
     let c = reg.counters(rx);
-    let mut parser = parser_for(InputFormat::Beast);
     let mut buf = vec![0u8; 64 * 1024];
     loop {
         let read = sock.async_io(Interest::READABLE, || super::stamp::recv(&sock, &mut buf));
@@ -225,7 +241,7 @@ async fn tcp_client(input: &InputConfig, tx: &SyncSender<ToCore>, reg: &Registry
                 failures = 0;
                 c.connects.fetch_add(1, Ordering::Relaxed);
                 tracing::info!(receiver = id, address = %input.address, "connected");
-                let r = stream(sock, input, tx, reg, rx).await;
+                let r = stream(sock, parser_for(InputFormat::Beast), input, tx, reg, rx).await;
                 c.disconnects.fetch_add(1, Ordering::Relaxed);
                 tracing::warn!(
                     receiver = id,
@@ -256,8 +272,10 @@ async fn tcp_server(input: &InputConfig, tx: SyncSender<ToCore>, reg: Arc<Regist
     // connection per receiver, as mlat-server does. A receiver reconnects
     // when it thinks its connection died; the old one may be half open for
     // hours (a NAT that forgot it), holding a descriptor, and two live ones
-    // would interleave one device's timestamps twice. Bounded by the receivers.
-    let mut newest: HashMap<usize, Arc<tokio::sync::Notify>> = HashMap::new();
+    // would interleave one device's timestamps twice. Bounded by the
+    // receivers; shared with the connections, which name their receiver
+    // themselves when their address does not.
+    let newest: Arc<Mutex<HashMap<usize, Arc<tokio::sync::Notify>>>> = Arc::default();
     loop {
         let (sock, peer) = match listener.accept().await {
             Ok(a) => a,
@@ -267,32 +285,100 @@ async fn tcp_server(input: &InputConfig, tx: SyncSender<ToCore>, reg: Arc<Regist
             }
         };
         in_a_row = 0;
-        let Some(rx) = fixed.or_else(|| reg.by_source(peer.ip(), input)) else {
-            let n = reg.unknown_senders.fetch_add(1, Ordering::Relaxed) + 1;
-            if n.is_power_of_two() {
-                tracing::warn!(peer = %peer, refused = n, "unknown sender refused");
-            }
-            drop(sock);
+        let known = fixed.or_else(|| reg.by_source(peer.ip(), input));
+        if known.is_none() && !reg.names_itself(input) {
+            refuse(&reg, peer, "unknown sender refused");
             continue;
-        };
-        let stop = Arc::new(tokio::sync::Notify::new());
-        if let Some(older) = newest.insert(rx, stop.clone()) {
-            // A permit is stored if that task is not waiting yet; if it has
-            // ended, nobody reads it.
-            older.notify_one();
         }
-        let (tx, reg, input) = (tx.clone(), reg.clone(), input.clone());
+        let (tx, reg, input, newest) = (tx.clone(), reg.clone(), input.clone(), newest.clone());
         tokio::spawn(async move {
+            let mut parser = parser_for(InputFormat::Beast);
+            let (rx, early) = match known {
+                Some(rx) => (rx, None),
+                None => match identify(&sock, parser.as_mut(), &input, &reg).await {
+                    Ok((rx, frames, arrival, bytes)) => (rx, Some((frames, arrival, bytes))),
+                    Err(why) => {
+                        refuse(&reg, peer, &format!("unknown sender refused: {why}"));
+                        return;
+                    }
+                },
+            };
+            let stop = Arc::new(tokio::sync::Notify::new());
+            if let Some(older) = newest.lock().expect("connections").insert(rx, stop.clone()) {
+                // A permit is stored if that task is not waiting yet; if it has
+                // ended, nobody reads it.
+                older.notify_one();
+            }
             let c = reg.counters(rx);
             c.connects.fetch_add(1, Ordering::Relaxed);
             tracing::info!(peer = %peer, receiver = rx, "receiver connected");
+            if let Some((frames, arrival, bytes)) = early {
+                c.bytes.fetch_add(bytes as u64, Ordering::Relaxed);
+                c.input_errors.fetch_add(parser.stats().input_errors(), Ordering::Relaxed);
+                forward(&tx, &reg, &c, rx, arrival, frames);
+            }
             let r = tokio::select! {
-                r = stream(sock, &input, &tx, &reg, rx) => r,
+                r = stream(sock, parser, &input, &tx, &reg, rx) => r,
                 _ = stop.notified() => Err(std::io::Error::other("closed: the receiver connected again")),
             };
             c.disconnects.fetch_add(1, Ordering::Relaxed);
             tracing::warn!(peer = %peer, "receiver disconnected: {}", r.err().map_or("end of stream".into(), |e| e.to_string()));
         });
+    }
+}
+
+/// Counts a refused sender and logs the first of each power of two.
+fn refuse(reg: &Registry, peer: std::net::SocketAddr, why: &str) {
+    let n = reg.unknown_senders.fetch_add(1, Ordering::Relaxed) + 1;
+    if n.is_power_of_two() {
+        tracing::warn!(peer = %peer, refused = n, "{why}");
+    }
+}
+
+/// How long a sender whose address names no receiver has to name itself,
+/// and how much it may send before it does.
+const NAME_WAIT_S: f64 = 10.0;
+const NAME_BYTES: usize = 1 << 20;
+
+/// Reads a connection from an address no receiver has until the sender
+/// names itself with readsb's receiver id (0xe3) or UUID (0xe4) frame, and
+/// looks the receiver up by its `beast_id`. Returns it with the frames read
+/// meanwhile (the connection is one receiver's, before its name too), the
+/// last read's arrival and the bytes read. Later names on the connection
+/// are not read again: readsb repeats the same one.
+async fn identify(
+    sock: &TcpStream,
+    parser: &mut (dyn FrameParser + Send),
+    input: &InputConfig,
+    reg: &Registry,
+) -> Result<(usize, Vec<RawFrame>, f64, usize), String> {
+    let _ = super::stamp::enable(sock);
+    let deadline = tokio::time::Instant::now() + Duration::from_secs_f64(NAME_WAIT_S);
+    let mut buf = vec![0u8; 64 * 1024];
+    let (mut frames, mut bytes, mut named) = (Vec::new(), 0usize, None);
+    loop {
+        let read = sock.async_io(Interest::READABLE, || super::stamp::recv(sock, &mut buf));
+        let (n, _, arrival) = tokio::time::timeout_at(deadline, read)
+            .await
+            .map_err(|_| format!("no receiver named within {NAME_WAIT_S} s"))?
+            .map_err(|e| e.to_string())?;
+        if n == 0 {
+            return Err("closed before naming a receiver".into());
+        }
+        bytes += n;
+        parser.push(&buf[..n], &mut |ev| match ev {
+            FeedEvent::Frame(f) => frames.push(f),
+            other => named = named.or(BeastId::of(&other)),
+        });
+        if let Some(id) = named {
+            return reg
+                .by_beast_id(id, input)
+                .map(|rx| (rx, frames, arrival, bytes))
+                .ok_or_else(|| format!("it names receiver {id}, which this input does not take"));
+        }
+        if bytes > NAME_BYTES {
+            return Err(format!("{bytes} bytes without naming a receiver"));
+        }
     }
 }
 
@@ -395,6 +481,88 @@ mod tests {
         (0..n)
             .map(|i| RawFrame::new(&[0x5d, 0x4b, 0x1a, 0x2b, 0, 0, i as u8], i as u64, 0).unwrap())
             .collect()
+    }
+
+    /// A Beast TCP server takes a sender its address does not name once it
+    /// names itself (readsb's receiver id or UUID frame), with the frames it
+    /// sent before its name too, and refuses and counts one that names an
+    /// unknown receiver or nobody.
+    #[test]
+    fn a_tcp_sender_is_known_by_the_receiver_id_or_uuid_it_sends() {
+        use tokio::io::AsyncWriteExt;
+        let uuid = *b"0f1e2d3c-4b5a-6978-8796-a5b4c3d2e1f0";
+        let receiver = |id: &str, beast_id: Option<&str>| ReceiverConfig {
+            id: id.into(),
+            lat: 0.0,
+            lon: 0.0,
+            alt_m: 0.0,
+            clock: "beast12".into(),
+            source: None,
+            beast_id: beast_id.map(Into::into),
+            max_rate: 0.0,
+        };
+        let reg = Arc::new(Registry { queue_frames: 1000, ..Default::default() });
+        for r in [
+            receiver("a", Some("0102030405060708")),
+            receiver("b", Some("0F1E2D3C-4B5A-6978-8796-A5B4C3D2E1F0")),
+            receiver("c", None),
+        ] {
+            reg.receivers.write().unwrap().push((r, Arc::default()));
+        }
+        let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+        let address: std::net::SocketAddr = ([127, 0, 0, 1], port).into();
+        let input = InputConfig {
+            kind: InputKind::BeastTcpServer,
+            address,
+            receiver: None,
+            receivers: Vec::new(),
+            format: "beast".into(),
+            idle_timeout_s: 0.0,
+        };
+        let beast = |frames: &[RawFrame]| {
+            let mut out = Vec::new();
+            for f in frames {
+                crate::feed::beast::encode(f, &mut out);
+            }
+            out
+        };
+        let (tx, core) = sync_channel(100);
+        let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+        rt.block_on(async {
+            let task = spawn(input, tx, reg.clone());
+            tokio::time::sleep(Duration::from_millis(50)).await;
+            let mut id = Vec::new();
+            crate::feed::beast::encode_receiver_id(0x0102_0304_0506_0708, &mut id);
+            let mut named_uuid = Vec::new();
+            crate::feed::beast::encode_receiver_uuid(&uuid, &mut named_uuid);
+            let mut unknown = Vec::new();
+            crate::feed::beast::encode_receiver_id(0xdead_beef, &mut unknown);
+            let sessions = [
+                [beast(&frames(1)), named_uuid, beast(&frames(2))].concat(),
+                [id, beast(&frames(3))].concat(),
+                [unknown, beast(&frames(4))].concat(),
+                beast(&frames(5)),
+            ];
+            for bytes in sessions {
+                let mut s = TcpStream::connect(address).await.unwrap();
+                s.write_all(&bytes).await.unwrap();
+                s.shutdown().await.unwrap();
+                tokio::time::sleep(Duration::from_millis(100)).await;
+            }
+            task.abort();
+        });
+        let mut got: Vec<(usize, usize)> = Vec::new();
+        for m in core.try_iter() {
+            if let ToCore::Frames { rx, frames, .. } = m {
+                match got.last_mut() {
+                    Some((last, n)) if *last == rx => *n += frames.len(),
+                    _ => got.push((rx, frames.len())),
+                }
+            }
+        }
+        assert_eq!(got, vec![(1, 3), (0, 3)]);
+        assert_eq!(reg.unknown_senders.load(Ordering::Relaxed), 2);
+        assert_eq!(reg.counters(1).connects.load(Ordering::Relaxed), 1);
     }
 
     #[test]

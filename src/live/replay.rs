@@ -19,7 +19,7 @@ use anyhow::{bail, Context, Result};
 use tokio::io::AsyncWriteExt;
 use tokio::net::{TcpListener, TcpSocket, UdpSocket};
 
-use super::config::InputKind;
+use super::config::{BeastId, InputKind};
 use super::unix_now;
 use crate::config::Config;
 use crate::feed::beast;
@@ -31,8 +31,9 @@ use crate::feed::RawFrame;
 enum Route {
     /// We listen here; the daemon connects.
     Serve(SocketAddr),
-    /// We connect here, from this local address.
-    Connect(SocketAddr, Option<std::net::IpAddr>),
+    /// We connect here, from this local address, and name the receiver
+    /// first when its address does not.
+    Connect(SocketAddr, Option<std::net::IpAddr>, Option<BeastId>),
     /// Datagrams to here, from this local address.
     Datagram(SocketAddr, Option<std::net::IpAddr>),
 }
@@ -46,7 +47,10 @@ fn route(cfg: &Config, id: &str) -> Option<Route> {
         };
         match input.kind {
             InputKind::BeastTcpClient => return Some(Route::Serve(input.address)),
-            InputKind::BeastTcpServer => return Some(Route::Connect(target, r.source)),
+            InputKind::BeastTcpServer => {
+                let name = r.beast_id.as_deref().and_then(BeastId::parse);
+                return Some(Route::Connect(target, r.source, name));
+            }
             InputKind::Udp if input.format == "beast" => return Some(Route::Datagram(target, r.source)),
             InputKind::Udp => {}
         }
@@ -118,12 +122,21 @@ async fn play(
             let (s, _) = l.accept().await?;
             Sink::Tcp(s)
         }
-        Route::Connect(addr, src) => {
+        Route::Connect(addr, src, name) => {
             let s = if addr.is_ipv4() { TcpSocket::new_v4()? } else { TcpSocket::new_v6()? };
             if let Some(ip) = src {
                 s.bind(SocketAddr::new(ip, 0)).with_context(|| format!("bind {ip}"))?;
             }
-            Sink::Tcp(s.connect(addr).await.with_context(|| format!("connect {addr}"))?)
+            let mut conn = s.connect(addr).await.with_context(|| format!("connect {addr}"))?;
+            // As readsb does: the receiver's name before its frames.
+            let mut named = Vec::new();
+            match name {
+                Some(BeastId::Id(id)) => beast::encode_receiver_id(id, &mut named),
+                Some(BeastId::Uuid(u)) => beast::encode_receiver_uuid(&u, &mut named),
+                None => {}
+            }
+            conn.write_all(&named).await?;
+            Sink::Tcp(conn)
         }
         Route::Datagram(addr, src) => {
             let local = SocketAddr::new(
