@@ -145,7 +145,8 @@ fn world() -> World {
 }
 
 /// The daemon's configuration: receivers 0-3 by TCP client, 4-7 pushing to
-/// the TCP server from 127.0.1.x, the rest by UDP from 127.0.2.x.
+/// the TCP server from 127.0.1.x (but 6, from 127.0.0.1, known by the
+/// receiver id frame it sends first), the rest by UDP from 127.0.2.x.
 fn config(w: &World, ports: &[u16], outputs: &[(u16, &str)]) -> String {
     let (server, udp) = (ports[0], ports[1]);
     let mut c = format!(
@@ -159,6 +160,7 @@ fn config(w: &World, ports: &[u16], outputs: &[(u16, &str)]) -> String {
         );
         match i {
             0..=3 => {}
+            6 => c += &format!("beast_id = \"{:016x}\"\n", 0xfe10_9000 + i),
             4..=7 => c += &format!("source = \"127.0.1.{i}\"\n"),
             _ => c += &format!("source = \"127.0.2.{i}\"\n"),
         }
@@ -366,8 +368,9 @@ fn daemon_end_to_end_over_loopback_with_faults() {
             used.insert(id.as_str().unwrap().to_string());
         }
     }
+    // One receiver of each input kind, and the one a receiver id frame names.
     for (i, (id, ..)) in w.receivers.iter().enumerate() {
-        if [0, 5, 9].contains(&i) {
+        if [0, 5, 6, 9].contains(&i) {
             assert!(used.contains(id), "receiver {id} (input kind {}) never used", i / 4);
         }
     }
