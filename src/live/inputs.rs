@@ -276,6 +276,9 @@ async fn tcp_server(input: &InputConfig, tx: SyncSender<ToCore>, reg: Arc<Regist
     // receivers; shared with the connections, which name their receiver
     // themselves when their address does not.
     let newest: Arc<Mutex<HashMap<usize, Arc<tokio::sync::Notify>>>> = Arc::default();
+    // Connections still to name their receiver: each may hold NAME_BYTES
+    // and its frames for NAME_WAIT_S, so a crowd of strangers is bounded.
+    let naming = Arc::new(AtomicUsize::new(0));
     loop {
         let (sock, peer) = match listener.accept().await {
             Ok(a) => a,
@@ -290,18 +293,28 @@ async fn tcp_server(input: &InputConfig, tx: SyncSender<ToCore>, reg: Arc<Regist
             refuse(&reg, peer, "unknown sender refused");
             continue;
         }
-        let (tx, reg, input, newest) = (tx.clone(), reg.clone(), input.clone(), newest.clone());
+        if known.is_none() && naming.load(Ordering::Relaxed) >= NAMING_AT_ONCE {
+            refuse(&reg, peer, "unknown sender refused: too many connections naming themselves at once");
+            continue;
+        }
+        let (tx, reg, input, newest, naming) =
+            (tx.clone(), reg.clone(), input.clone(), newest.clone(), naming.clone());
         tokio::spawn(async move {
             let mut parser = parser_for(InputFormat::Beast);
             let (rx, early) = match known {
                 Some(rx) => (rx, None),
-                None => match identify(&sock, parser.as_mut(), &input, &reg).await {
-                    Ok((rx, frames, arrival, bytes)) => (rx, Some((frames, arrival, bytes))),
-                    Err(why) => {
-                        refuse(&reg, peer, &format!("unknown sender refused: {why}"));
-                        return;
+                None => {
+                    naming.fetch_add(1, Ordering::Relaxed);
+                    let named = identify(&sock, parser.as_mut(), &input, &reg).await;
+                    naming.fetch_sub(1, Ordering::Relaxed);
+                    match named {
+                        Ok((rx, frames, arrival, bytes)) => (rx, Some((frames, arrival, bytes))),
+                        Err(why) => {
+                            refuse(&reg, peer, &format!("unknown sender refused: {why}"));
+                            return;
+                        }
                     }
-                },
+                }
             };
             let stop = Arc::new(tokio::sync::Notify::new());
             if let Some(older) = newest.lock().expect("connections").insert(rx, stop.clone()) {
@@ -336,16 +349,18 @@ fn refuse(reg: &Registry, peer: std::net::SocketAddr, why: &str) {
 }
 
 /// How long a sender whose address names no receiver has to name itself,
-/// and how much it may send before it does.
+/// how much it may send before it does, and how many may be at it at once:
+/// together they bound what strangers can make the service hold.
 const NAME_WAIT_S: f64 = 10.0;
-const NAME_BYTES: usize = 1 << 20;
+const NAME_BYTES: usize = 256 << 10;
+const NAMING_AT_ONCE: usize = 64;
 
 /// Reads a connection from an address no receiver has until the sender
 /// names itself with readsb's receiver id (0xe3) or UUID (0xe4) frame, and
 /// looks the receiver up by its `beast_id`. Returns it with the frames read
 /// meanwhile (the connection is one receiver's, before its name too), the
-/// last read's arrival and the bytes read. Later names on the connection
-/// are not read again: readsb repeats the same one.
+/// last read's arrival and the bytes read. The first name holds for the
+/// connection: later ones are not looked at.
 async fn identify(
     sock: &TcpStream,
     parser: &mut (dyn FrameParser + Send),
@@ -354,7 +369,7 @@ async fn identify(
 ) -> Result<(usize, Vec<RawFrame>, f64, usize), String> {
     let _ = super::stamp::enable(sock);
     let deadline = tokio::time::Instant::now() + Duration::from_secs_f64(NAME_WAIT_S);
-    let mut buf = vec![0u8; 64 * 1024];
+    let mut buf = vec![0u8; 16 * 1024];
     let (mut frames, mut bytes, mut named) = (Vec::new(), 0usize, None);
     loop {
         let read = sock.async_io(Interest::READABLE, || super::stamp::recv(sock, &mut buf));
