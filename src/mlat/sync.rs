@@ -254,8 +254,16 @@ impl ClockSync {
         // pair is not usable; the reverse edge is the same relation inverted.
         // Plain loops over slices: iterator adapters and the small vectors'
         // checks on every access were two thirds of this function.
-        let mut w_buf: smallvec::SmallVec<[Option<(f64, f64)>; 64]> = smallvec::smallvec![None; n * n];
-        let w = &mut w_buf[..];
+        // On the stack up to eight copies (a small vector built its inline
+        // array and then moved it, a 1.5 KB copy per transmission).
+        let mut w_stack = [None; 64];
+        let mut w_heap = Vec::new();
+        let w = if n * n <= w_stack.len() {
+            &mut w_stack[..n * n]
+        } else {
+            w_heap.resize(n * n, None);
+            &mut w_heap[..]
+        };
         for a in 0..n {
             let ca = copies[a];
             for b in a + 1..n {
