@@ -238,7 +238,12 @@ pub fn encode_receiver_uuid(uuid: &[u8; 36], out: &mut Vec<u8>) {
 fn encode_body(ty: u8, body: &[u8], out: &mut Vec<u8>) {
     out.push(ESC);
     out.push(ty);
-    for &b in body {
+    push_escaped(body.iter().copied(), out);
+}
+
+/// A frame's body with every literal 0x1a doubled.
+fn push_escaped(body: impl IntoIterator<Item = u8>, out: &mut Vec<u8>) {
+    for b in body {
         out.push(b);
         if b == ESC {
             out.push(ESC);
@@ -255,12 +260,7 @@ pub fn encode(frame: &RawFrame, out: &mut Vec<u8>) {
         _ => b'3',
     });
     let ts = frame.timestamp.to_be_bytes();
-    for &b in ts[2..].iter().chain(std::iter::once(&frame.signal)).chain(frame.bytes()) {
-        out.push(b);
-        if b == ESC {
-            out.push(ESC);
-        }
-    }
+    push_escaped(ts[2..].iter().chain(std::iter::once(&frame.signal)).chain(frame.bytes()).copied(), out);
 }
 
 #[cfg(test)]
