@@ -126,6 +126,11 @@ impl std::fmt::Display for BeastId {
 }
 
 impl ReceiverConfig {
+    /// Its `beast_id` parsed (`None` when absent or, before validation, malformed).
+    pub fn beast_name(&self) -> Option<BeastId> {
+        self.beast_id.as_deref().and_then(BeastId::parse)
+    }
+
     pub fn decl(&self) -> ReceiverDecl {
         let clock = if self.clock == "gps" { ClockKind::Gps } else { ClockKind::Beast12 };
         ReceiverDecl { id: self.id.clone(), lat: self.lat, lon: self.lon, alt: self.alt_m, clock }
@@ -275,10 +280,7 @@ pub fn validate(
             match BeastId::parse(b) {
                 None => errs.push(format!("{at}: beast_id = {b:?}: 16 hex digits or a UUID")),
                 Some(id) => {
-                    if receivers[..i]
-                        .iter()
-                        .any(|o| o.beast_id.as_deref().and_then(BeastId::parse) == Some(id))
-                    {
+                    if receivers[..i].iter().any(|o| o.beast_name() == Some(id)) {
                         errs.push(format!("{at}: beast_id {b} used twice"));
                     }
                 }

@@ -83,7 +83,7 @@ impl Registry {
             .read()
             .expect("registry")
             .iter()
-            .position(|(r, _)| r.beast_id.as_deref().and_then(BeastId::parse) == Some(id) && input.takes(r))
+            .position(|(r, _)| r.beast_name() == Some(id) && input.takes(r))
     }
 
     /// Whether a sender this input does not know by address may still name

@@ -47,10 +47,7 @@ fn route(cfg: &Config, id: &str) -> Option<Route> {
         };
         match input.kind {
             InputKind::BeastTcpClient => return Some(Route::Serve(input.address)),
-            InputKind::BeastTcpServer => {
-                let name = r.beast_id.as_deref().and_then(BeastId::parse);
-                return Some(Route::Connect(target, r.source, name));
-            }
+            InputKind::BeastTcpServer => return Some(Route::Connect(target, r.source, r.beast_name())),
             InputKind::Udp if input.format == "beast" => return Some(Route::Datagram(target, r.source)),
             InputKind::Udp => {}
         }
@@ -128,7 +125,8 @@ async fn play(
                 s.bind(SocketAddr::new(ip, 0)).with_context(|| format!("bind {ip}"))?;
             }
             let mut conn = s.connect(addr).await.with_context(|| format!("connect {addr}"))?;
-            // As readsb does: the receiver's name before its frames.
+            // The receiver's name before its frames, so that a daemon that
+            // does not know it by address can tell who it is.
             let mut named = Vec::new();
             match name {
                 Some(BeastId::Id(id)) => beast::encode_receiver_id(id, &mut named),
