@@ -238,7 +238,7 @@ impl TrackConfig {
             Some(t) => DMatrix::from_fn(n, n, |r, c| t[r][c]),
             None => super::Imm::sticky(n, self.stay),
         };
-        Arc::new(ImmSpec { models: self.models.iter().map(ModelConfig::model).collect(), transition })
+        Arc::new(ImmSpec::new(self.models.iter().map(ModelConfig::model).collect(), transition))
     }
 
     /// The output period for a NACp (s).

@@ -25,6 +25,20 @@ pub struct ImmSpec {
     pub models: Vec<MotionModel>,
     /// Row i: probabilities of switching from model i to each model.
     pub transition: DMatrix<f64>,
+    /// Per column, its one value off the diagonal when every column has one
+    /// (a `sticky` matrix): what lets `prepare` share a sum across models.
+    uniform_off: Option<PerModel<f64>>,
+}
+
+impl ImmSpec {
+    pub fn new(models: Vec<MotionModel>, transition: DMatrix<f64>) -> ImmSpec {
+        let n = models.len();
+        assert_eq!((transition.nrows(), transition.ncols()), (n, n), "transition matrix shape");
+        let off = |j: usize| transition[((j + 1) % n, j)];
+        let uniform = (0..n).all(|j| (0..n).all(|i| i == j || transition[(i, j)] == off(j)));
+        let uniform_off = uniform.then(|| (0..n).map(off).collect());
+        ImmSpec { models, transition, uniform_off }
+    }
 }
 
 #[derive(Clone, Debug)]
@@ -46,9 +60,7 @@ pub struct Step {
 impl Imm {
     /// Starts every model from `init`, with equal probabilities.
     pub fn new(models: Vec<MotionModel>, transition: DMatrix<f64>, init: Gaussian) -> Imm {
-        let n = models.len();
-        assert_eq!((transition.nrows(), transition.ncols()), (n, n), "transition matrix shape");
-        Imm::with_spec(Arc::new(ImmSpec { models, transition }), init)
+        Imm::with_spec(Arc::new(ImmSpec::new(models, transition)), init)
     }
 
     pub fn with_spec(spec: Arc<ImmSpec>, init: Gaussian) -> Imm {
@@ -108,22 +120,21 @@ impl Imm {
             a.ger(1.0, &d, &d, 1.0);
             spread.push((d, a));
         }
-        let off = |j: usize| tr[((j + 1) % n, j)];
-        let uniform = (0..n).all(|j| (0..n).all(|i| i == j || tr[(i, j)] == off(j)));
-        let shared = uniform.then(|| {
+        // (each column's value off the diagonal, B) when the matrix is sticky.
+        let shared = self.spec.uniform_off.as_ref().map(|off| {
             let mut b = Matrix6::<f64>::zeros();
             for ((_, a), &mu) in spread.iter().zip(&self.mu) {
                 b.zip_apply(a, |b, a| *b += mu * a);
             }
-            b
+            (off, b)
         });
         for (j, ((cj, model), out)) in c.iter().zip(&self.spec.models).zip(predicted.iter_mut()).enumerate() {
             let cj = cj.max(1e-300);
             let (mut m, mut p) = (Vector6::<f64>::zeros(), Matrix6::<f64>::zeros());
-            if let Some(b) = &shared {
+            if let Some((off, b)) = &shared {
                 // m_j = sum_i w_ij d_i reduces to own * d_j: sum_i mu_i d_i
                 // is zero, xr being that mean.
-                let (r, own) = (off(j) / cj, (tr[(j, j)] - off(j)) * self.mu[j] / cj);
+                let (r, own) = (off[j] / cj, (tr[(j, j)] - off[j]) * self.mu[j] / cj);
                 let (d, a) = &spread[j];
                 m = d * own;
                 p.zip_zip_apply(b, a, |p, b, a| *p = r * b + own * a);
