@@ -24,6 +24,9 @@ pub enum ModelConfig {
     Singer { alpha: f64, sigma_a: f64 },
     /// Current statistical: manoeuvre rate `alpha` (1/s), largest acceleration (m/s^2).
     Cs { alpha: f64, a_max: f64 },
+    /// Tangential acceleration: `accel` (m/s^2, positive speeding up) along
+    /// the velocity; `q` as for cv.
+    Ta { accel: f64, q: f64 },
 }
 
 impl ModelConfig {
@@ -36,6 +39,7 @@ impl ModelConfig {
             }
             ModelConfig::Singer { alpha, sigma_a } => MotionModel::Singer { alpha, sigma_a },
             ModelConfig::Cs { alpha, a_max } => MotionModel::CurrentStatistical { alpha, a_max },
+            ModelConfig::Ta { accel, q } => MotionModel::Tangential { accel, q },
         }
     }
 
@@ -61,6 +65,14 @@ impl ModelConfig {
                 positive("alpha", alpha).and(positive("sigma_a", sigma_a))
             }
             ModelConfig::Cs { alpha, a_max } => positive("alpha", alpha).and(positive("a_max", a_max)),
+            ModelConfig::Ta { accel, q } => {
+                positive("q", q)?;
+                if accel.is_finite() && accel.abs() <= 20.0 {
+                    Ok(())
+                } else {
+                    Err(format!("accel = {accel} must be within +-20"))
+                }
+            }
         }
     }
 }
@@ -252,5 +264,27 @@ impl TrackConfig {
     /// The densest period of the table: used while a track is in conflict.
     pub fn densest_period_s(&self) -> f64 {
         self.period_by_nacp.iter().copied().fold(self.period_default_s, f64::min)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_benchmark_model_set_loads_and_bad_models_are_each_named() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let cfg =
+            crate::config::Config::load(&root.join("fixtures/configs/benchmark-accelerations.toml")).unwrap();
+        let t = &cfg.core.track;
+        assert!(t.models.contains(&ModelConfig::Ta { accel: -3.0, q: 0.05 }), "{:?}", t.models);
+        assert_eq!(t.imm_spec().models.len(), 5);
+        let bad = TrackConfig {
+            models: vec![ModelConfig::Ta { accel: 30.0, q: 0.05 }, ModelConfig::Ta { accel: 1.0, q: 0.0 }],
+            ..TrackConfig::default()
+        };
+        let errs = bad.validate().unwrap_err();
+        assert!(errs.contains("models[0]: accel = 30 must be within +-20"), "{errs}");
+        assert!(errs.contains("models[1]: q = 0 must be positive"), "{errs}");
     }
 }

@@ -30,6 +30,8 @@ pub enum MotionModel {
     Singer { alpha: f64, sigma_a: f64 },
     /// Manoeuvre rate alpha (1/s) and largest acceleration (m/s^2).
     CurrentStatistical { alpha: f64, a_max: f64 },
+    /// Acceleration along the velocity (m/s^2) and velocity noise density.
+    Tangential { accel: f64, q: f64 },
 }
 
 /// Per-axis (position, velocity, acceleration) blocks into the 6-state layout.
@@ -124,6 +126,18 @@ impl MotionModel {
                     Transition::Turn { h: [a, b, c, s, -w * s, w * c], m: [-b, a, -s, c, -w * c, -w * s] };
                 (f, per_axis(&cv_noise(q, t)))
             }
+            MotionModel::Tangential { accel, q } => {
+                // The speed s grows by accel t along an unchanged direction:
+                // the velocity scales by 1 + accel t / s and the position
+                // moves by v t (1 + accel t / 2s), linear in the state for
+                // the s of the point predicted from (exact for its own
+                // motion; the Jacobian's term across the track, accel t^2 /
+                // 2s, is left out). Below 1 m/s it has no direction to use.
+                let s = x[2].hypot(x[3]).max(1.0);
+                let k = accel / s;
+                let f = Matrix3::new(1.0, t + k * t * t / 2.0, 0.0, 0.0, 1.0 + k * t, 0.0, 0.0, k, 0.0);
+                (Transition::Dense(per_axis(&f)), per_axis(&cv_noise(q, t)))
+            }
             MotionModel::Singer { alpha, sigma_a } => {
                 let e = (-alpha * t).exp();
                 let f = Matrix3::new(
@@ -157,6 +171,9 @@ impl MotionModel {
 #[derive(Clone, Copy, Debug)]
 enum Transition {
     PerAxis(Matrix3<f64>),
+    /// No structure to use: tangential acceleration's, whose acceleration
+    /// rows follow the velocity (a model off the default set).
+    Dense(Matrix6<f64>),
     /// Row `i` is `[i < 2] x_i + h_i ve + m_i vn`.
     Turn {
         h: [f64; 6],
@@ -168,6 +185,7 @@ impl Transition {
     fn dense(&self) -> Matrix6<f64> {
         match self {
             Transition::PerAxis(f) => per_axis(f),
+            Transition::Dense(f) => *f,
             Transition::Turn { h, m } => Matrix6::from_fn(|i, j| match j {
                 2 => h[i],
                 3 => m[i],
@@ -180,6 +198,7 @@ impl Transition {
     /// `F x`.
     fn apply(&self, x: &Vector6<f64>) -> Vector6<f64> {
         match self {
+            Transition::Dense(f) => f * x,
             Transition::PerAxis(f) => {
                 debug_assert!(f[(1, 0)] == 0.0 && f[(2, 0)] == 0.0 && f[(2, 1)] == 0.0, "upper triangular");
                 let mut y = Vector6::zeros();
@@ -211,6 +230,7 @@ impl Transition {
     fn sandwich(&self, p: &Matrix6<f64>) -> Matrix6<f64> {
         let (mut fp, mut out) = (Matrix6::zeros(), Matrix6::zeros());
         match self {
+            Transition::Dense(f) => return f * p * f.transpose(),
             Transition::PerAxis(f) => {
                 for axis in 0..2 {
                     let (r0, r1, r2) = (axis, 2 + axis, 4 + axis);
@@ -353,6 +373,7 @@ fn singer_noise_numeric(alpha: f64, sigma_a: f64, t: f64, n: usize) -> Matrix3<f
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::Vector2;
 
     #[test]
     fn the_sparse_prediction_is_the_dense_products_bit_for_bit() {
@@ -368,6 +389,7 @@ mod tests {
             MotionModel::CoordinatedTurn { omega: -3f64.to_radians(), q: 0.5 },
             MotionModel::Singer { alpha: 0.5, sigma_a: 2.0 },
             MotionModel::CurrentStatistical { alpha: 1.0, a_max: 8.0 },
+            MotionModel::Tangential { accel: -2.0, q: 0.5 },
         ];
         for _ in 0..200 {
             let x = Vector6::from_fn(|_, _| next());
@@ -406,6 +428,31 @@ mod tests {
         assert!((x[0] - r).abs() < 1e-6 && (x[1] - r).abs() < 1e-6);
         // Centripetal acceleration v * omega, pointing at the centre (south).
         assert!((x[5] + 100.0 * omega).abs() < 1e-9 && x[4].abs() < 1e-9);
+    }
+
+    #[test]
+    fn tangential_acceleration_speeds_up_along_the_track() {
+        // 120 m/s on heading 60 deg, +3 m/s^2 for ten 1 s steps: 150 m/s on
+        // the same heading, 120 x 10 + 3 x 100 / 2 = 1,350 m along it, the
+        // acceleration vector 3 m/s^2 along the track; -3 m/s^2 the mirror.
+        let heading = Vector2::new(60f64.to_radians().sin(), 60f64.to_radians().cos());
+        for (accel, speed, distance) in [(3.0, 150.0, 1350.0), (-3.0, 90.0, 1050.0)] {
+            let model = MotionModel::Tangential { accel, q: 0.5 };
+            let v = heading * 120.0;
+            let mut x = Vector6::new(0.0, 0.0, v.x, v.y, 0.0, 0.0);
+            for _ in 0..10 {
+                x = model.predict(1.0, &x, &Matrix6::identity()).0;
+            }
+            let (p, v, a) = (Vector2::new(x[0], x[1]), Vector2::new(x[2], x[3]), Vector2::new(x[4], x[5]));
+            assert!((v - heading * speed).norm() < 1e-9, "{accel}: velocity {v:?}");
+            assert!((p - heading * distance).norm() < 1e-9, "{accel}: position {p:?}");
+            assert!((a - heading * accel).norm() < 1e-9, "{accel}: acceleration {a:?}");
+        }
+        // No acceleration: constant velocity's motion.
+        let x = Vector6::new(5.0, -3.0, 100.0, 40.0, 0.0, 0.0);
+        let (tangential, _) = MotionModel::Tangential { accel: 0.0, q: 1.0 }.transition_at(2.0, &x);
+        let (cv, _) = MotionModel::ConstantVelocity { q: 1.0 }.transition(2.0);
+        assert_eq!(tangential * x, cv * x);
     }
 
     #[test]
