@@ -136,7 +136,7 @@ impl MotionModel {
                 let s = x[2].hypot(x[3]).max(1.0);
                 let k = accel / s;
                 let f = Matrix3::new(1.0, t + k * t * t / 2.0, 0.0, 0.0, 1.0 + k * t, 0.0, 0.0, k, 0.0);
-                (Transition::Dense(per_axis(&f)), per_axis(&cv_noise(q, t)))
+                (Transition::Dense(Box::new(per_axis(&f))), per_axis(&cv_noise(q, t)))
             }
             MotionModel::Singer { alpha, sigma_a } => {
                 let e = (-alpha * t).exp();
@@ -168,12 +168,13 @@ impl MotionModel {
 /// the dense sum of signed zeros in the mean; in the covariance `Q`, whose
 /// zeros are all positive, is added after, which makes any zero positive
 /// either way.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 enum Transition {
     PerAxis(Matrix3<f64>),
     /// No structure to use: tangential acceleration's, whose acceleration
-    /// rows follow the velocity (a model off the default set).
-    Dense(Matrix6<f64>),
+    /// rows follow the velocity (a model off the default set). Boxed: inline
+    /// it made every model's transition four times as large to move.
+    Dense(Box<Matrix6<f64>>),
     /// Row `i` is `[i < 2] x_i + h_i ve + m_i vn`.
     Turn {
         h: [f64; 6],
@@ -185,7 +186,7 @@ impl Transition {
     fn dense(&self) -> Matrix6<f64> {
         match self {
             Transition::PerAxis(f) => per_axis(f),
-            Transition::Dense(f) => *f,
+            Transition::Dense(f) => **f,
             Transition::Turn { h, m } => Matrix6::from_fn(|i, j| match j {
                 2 => h[i],
                 3 => m[i],
@@ -198,7 +199,7 @@ impl Transition {
     /// `F x`.
     fn apply(&self, x: &Vector6<f64>) -> Vector6<f64> {
         match self {
-            Transition::Dense(f) => f * x,
+            Transition::Dense(f) => **f * x,
             Transition::PerAxis(f) => {
                 debug_assert!(f[(1, 0)] == 0.0 && f[(2, 0)] == 0.0 && f[(2, 1)] == 0.0, "upper triangular");
                 let mut y = Vector6::zeros();
@@ -230,7 +231,7 @@ impl Transition {
     fn sandwich(&self, p: &Matrix6<f64>) -> Matrix6<f64> {
         let (mut fp, mut out) = (Matrix6::zeros(), Matrix6::zeros());
         match self {
-            Transition::Dense(f) => return f * p * f.transpose(),
+            Transition::Dense(f) => return **f * p * f.transpose(),
             Transition::PerAxis(f) => {
                 for axis in 0..2 {
                     let (r0, r1, r2) = (axis, 2 + axis, 4 + axis);
