@@ -147,7 +147,7 @@ impl Front {
     /// ran out are processed; the tracker is told the time.
     pub fn advance(&mut self, now: f64, cmds: &mut Vec<Cmd>) {
         let (grouper, mut ctx) = self.ctx();
-        grouper.advance(now, &mut |g: Group| ctx.on_group(&g, now, cmds));
+        grouper.advance(now, &mut |g: &Group| ctx.on_group(g, now, cmds));
         if now >= self.next_sweep {
             self.next_sweep = now + 1.0;
             let drop = self.drop_after_s;
@@ -166,9 +166,9 @@ impl Front {
     /// End of input: everything pending is processed.
     pub fn finish(&mut self, cmds: &mut Vec<Cmd>) {
         let (grouper, mut ctx) = self.ctx();
-        grouper.flush(&mut |g: Group| {
+        grouper.flush(&mut |g: &Group| {
             let now = g.first_arrival;
-            ctx.on_group(&g, now, cmds)
+            ctx.on_group(g, now, cmds)
         });
         cmds.push(Cmd::Finish);
     }
@@ -201,7 +201,7 @@ impl Front {
         }
         self.advance(arrival, cmds);
         let (grouper, mut ctx) = self.ctx();
-        match grouper.add(rx, arrival, frame, &mut |g: Group| ctx.on_group(&g, arrival, cmds)) {
+        match grouper.add(rx, arrival, frame, &mut |g: &Group| ctx.on_group(g, arrival, cmds)) {
             Added::New => {}
             Added::Joined => return,
             Added::Duplicate => {
