@@ -109,7 +109,7 @@ pub struct MlatFix {
     pub alt_m: f64,
     pub cov_en: [[f64; 2]; 2],
     pub cov_ecef: [[f64; 3]; 3],
-    pub receivers: Vec<usize>,
+    pub receivers: smallvec::SmallVec<[usize; 8]>,
     pub gdop: f64,
     /// Residual chi-square per degree of freedom (0 when exactly determined).
     pub chi2: f64,
@@ -540,7 +540,7 @@ impl Mlat {
                 return None;
             }
         };
-        let used: Vec<usize> = sites.iter().flatten().copied().collect();
+        let used: smallvec::SmallVec<[usize; 8]> = sites.iter().flatten().copied().collect();
         if !info.addr_known && fix.dof == 0 {
             // Nothing checks an unverified address: no fix from it.
             self.stats.unverified_address += 1;

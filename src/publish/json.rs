@@ -8,7 +8,8 @@ use crate::fuse::{Alert, TrackReport};
 use crate::mlat::MlatFix;
 
 #[derive(Serialize)]
-struct MlatRecord<'a> {
+#[serde(bound = "")]
+struct MlatRecord<'r, 'a, F: Fn(usize) -> &'a str> {
     #[serde(rename = "type")]
     kind: &'static str,
     hex: Hex,
@@ -17,10 +18,20 @@ struct MlatRecord<'a> {
     lon: f64,
     alt_m: f64,
     cov_en: [[f64; 2]; 2],
-    receivers: Vec<&'a str>,
+    receivers: Names<'r, 'a, F>,
     gdop: f64,
     chi2: f64,
     altitude_used: bool,
+}
+
+/// Receivers by index, serialised as their ids without collecting them:
+/// a vector of names per MLAT record was an allocation per fix.
+struct Names<'r, 'a, F: Fn(usize) -> &'a str>(&'r [usize], &'r F);
+
+impl<'a, F: Fn(usize) -> &'a str> Serialize for Names<'_, 'a, F> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_seq(self.0.iter().map(|&r| (self.1)(r)))
+    }
 }
 
 #[derive(Serialize)]
@@ -188,7 +199,7 @@ fn round(v: f64, k: f64) -> f64 {
     (v * k).round() / k
 }
 
-fn mlat_record<'a>(f: &MlatFix, receiver_id: &impl Fn(usize) -> &'a str) -> MlatRecord<'a> {
+fn mlat_record<'r, 'a, F: Fn(usize) -> &'a str>(f: &'r MlatFix, receiver_id: &'r F) -> MlatRecord<'r, 'a, F> {
     MlatRecord {
         kind: "mlat",
         hex: Hex::addr(f.addr),
@@ -197,7 +208,7 @@ fn mlat_record<'a>(f: &MlatFix, receiver_id: &impl Fn(usize) -> &'a str) -> Mlat
         lon: round(f.lon, 1e8),
         alt_m: round(f.alt_m, 100.0),
         cov_en: f.cov_en.map(|r| r.map(|v| round(v, 1e3))),
-        receivers: f.receivers.iter().map(|&r| receiver_id(r)).collect(),
+        receivers: Names(&f.receivers, receiver_id),
         gdop: round(f.gdop, 1e3),
         chi2: round(f.chi2, 1e3),
         altitude_used: f.altitude_used,
