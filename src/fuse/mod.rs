@@ -126,7 +126,8 @@ pub struct TrackReport {
     pub period_s: f64,
     pub motion: Motion,
     pub adsb_suspect: bool,
-    pub flight: Option<String>,
+    /// Shared with the aircraft: a copy per publication was an allocation.
+    pub flight: Option<Arc<str>>,
     pub squawk: Option<u16>,
     /// Age (s) of the newest ADS-B and MLAT measurement, when recent.
     pub ages_s: [Option<f64>; 2],
@@ -233,7 +234,7 @@ struct Aircraft {
     waiting: Waiting,
     nac_p: Option<u8>,
     alt_baro_ft: Option<i32>,
-    flight: Option<String>,
+    flight: Option<Arc<str>>,
     squawk: Option<u16>,
     motion: MotionTest,
     motion_plane: Option<Plane>,
@@ -297,7 +298,9 @@ impl Fuser {
     /// Identity and state from messages that carry no position.
     pub fn set_flight(&mut self, addr: u32, flight: String) {
         if let Some(a) = self.aircraft.get_mut(&addr) {
-            a.flight = Some(flight);
+            if a.flight.as_deref() != Some(flight.as_str()) {
+                a.flight = Some(flight.into());
+            }
         }
     }
 
