@@ -51,28 +51,21 @@ impl ModelConfig {
                 Err(format!("{name} = {v} must be positive"))
             }
         };
+        let within = |name: &str, v: f64, limit: f64| {
+            if v.is_finite() && v.abs() <= limit {
+                Ok(())
+            } else {
+                Err(format!("{name} = {v} must be within +-{limit}"))
+            }
+        };
         match *self {
             ModelConfig::Cv { q } | ModelConfig::Ca { q } => positive("q", q),
-            ModelConfig::Ct { turn_dps, q } => {
-                positive("q", q)?;
-                if turn_dps.is_finite() && turn_dps.abs() <= 20.0 {
-                    Ok(())
-                } else {
-                    Err(format!("turn_dps = {turn_dps} must be within +-20"))
-                }
-            }
+            ModelConfig::Ct { turn_dps, q } => positive("q", q).and(within("turn_dps", turn_dps, 20.0)),
             ModelConfig::Singer { alpha, sigma_a } => {
                 positive("alpha", alpha).and(positive("sigma_a", sigma_a))
             }
             ModelConfig::Cs { alpha, a_max } => positive("alpha", alpha).and(positive("a_max", a_max)),
-            ModelConfig::Ta { accel, q } => {
-                positive("q", q)?;
-                if accel.is_finite() && accel.abs() <= 20.0 {
-                    Ok(())
-                } else {
-                    Err(format!("accel = {accel} must be within +-20"))
-                }
-            }
+            ModelConfig::Ta { accel, q } => positive("q", q).and(within("accel", accel, 20.0)),
         }
     }
 }

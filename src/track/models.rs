@@ -130,9 +130,11 @@ impl MotionModel {
                 // The speed s grows by accel t along an unchanged direction:
                 // the velocity scales by 1 + accel t / s and the position
                 // moves by v t (1 + accel t / 2s), linear in the state for
-                // the s of the point predicted from (exact for its own
-                // motion; the Jacobian's term across the track, accel t^2 /
-                // 2s, is left out). Below 1 m/s it has no direction to use.
+                // the s of the point predicted from. The mean is exact; the
+                // covariance scales an along-track velocity error by the
+                // same 1 + accel t / s, where the true Jacobian passes it
+                // unchanged (2.5% a second at 3 m/s^2 and 120 m/s). Below
+                // 1 m/s there is no direction to use.
                 let s = x[2].hypot(x[3]).max(1.0);
                 let k = accel / s;
                 let f = Matrix3::new(1.0, t + k * t * t / 2.0, 0.0, 0.0, 1.0 + k * t, 0.0, 0.0, k, 0.0);
