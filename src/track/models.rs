@@ -134,9 +134,10 @@ impl MotionModel {
                 // covariance scales an along-track velocity error by the
                 // same 1 + accel t / s, where the true Jacobian passes it
                 // unchanged (2.5% a second at 3 m/s^2 and 120 m/s). Below
-                // 1 m/s there is no direction to use.
-                let s = x[2].hypot(x[3]).max(1.0);
-                let k = accel / s;
+                // 1 m/s there is no direction to accelerate along (nor in
+                // `transition`, which has no state): constant velocity.
+                let s = x[2].hypot(x[3]);
+                let k = if s >= 1.0 { accel / s } else { 0.0 };
                 let f = Matrix3::new(1.0, t + k * t * t / 2.0, 0.0, 0.0, 1.0 + k * t, 0.0, 0.0, k, 0.0);
                 (Transition::Dense(Box::new(per_axis(&f))), per_axis(&cv_noise(q, t)))
             }
@@ -451,11 +452,14 @@ mod tests {
             assert!((p - heading * distance).norm() < 1e-9, "{accel}: position {p:?}");
             assert!((a - heading * accel).norm() < 1e-9, "{accel}: acceleration {a:?}");
         }
-        // No acceleration: constant velocity's motion.
+        // No acceleration, or no speed to accelerate along (a standstill,
+        // or `transition` without a state): constant velocity's motion.
         let x = Vector6::new(5.0, -3.0, 100.0, 40.0, 0.0, 0.0);
-        let (tangential, _) = MotionModel::Tangential { accel: 0.0, q: 1.0 }.transition_at(2.0, &x);
         let (cv, _) = MotionModel::ConstantVelocity { q: 1.0 }.transition(2.0);
+        let (tangential, _) = MotionModel::Tangential { accel: 0.0, q: 1.0 }.transition_at(2.0, &x);
         assert_eq!(tangential * x, cv * x);
+        let (still, _) = MotionModel::Tangential { accel: 3.0, q: 1.0 }.transition(2.0);
+        assert_eq!(still, cv);
     }
 
     #[test]
