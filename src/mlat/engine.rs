@@ -263,7 +263,10 @@ impl Mlat {
         let partner = match r.gps_partner {
             Some((g, at)) if now - at < 10.0 => Some(g),
             _ => {
-                let best = (self.sync.gps_peers(rx).iter())
+                let best = self
+                    .sync
+                    .gps_peers(rx)
+                    .iter()
                     .filter_map(|&g| self.sync.edge(rx, g, local, now).map(|(_, v)| (g, v)))
                     .min_by(|a, b| a.1.total_cmp(&b.1))
                     .map(|(g, _)| g);
