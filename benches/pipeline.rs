@@ -5,13 +5,17 @@
 //! - `run_capture`: the `run --capture` command itself (file in, parsing,
 //!   the core's front and back stages on threads of their own, JSON lines out).
 //!
-//! Run: `cargo bench --bench pipeline`.
+//! Run: `cargo bench --bench pipeline`. With the binary's allocator
+//! (mimalloc), so the figures are the command's.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use fuse1090::core::{Core, CoreConfig};
 use fuse1090::feed::capture::{CaptureReader, CaptureRecord};
 use fuse1090::sim::scenario::Scenario;
 use fuse1090::sim::simulate;
+
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn capture() -> Vec<u8> {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/scenarios/scale.toml");
