@@ -89,7 +89,7 @@ pub fn run(config_path: &Path) -> Result<()> {
 /// kernel's usual `defrag = madvise` the first touch of such a page may
 /// compact memory on the spot, a stall of tens of milliseconds: at 1 M
 /// frames/s (`live_load`) three runs in ten had an ADS-B-only p99 of 21-78
-/// ms with them, none over 1 ms without.
+/// ms with them, none of fifteen over 1 ms without.
 fn no_huge_pages() -> std::io::Result<()> {
     #[cfg(target_os = "linux")]
     {
@@ -502,11 +502,6 @@ fn metrics(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outputs
 
 #[cfg(all(test, target_os = "linux"))]
 mod tests {
-    /// The service relies on threads started after the call inheriting the
-    /// policy (an earlier version asked for reset-on-fork, which the kernel
-    /// also applies to new threads: only the input thread ran realtime and
-    /// the latency got worse). Where realtime scheduling is not permitted,
-    /// the refusal is a permission error the service can report.
     /// The setting is the process's: one thread's call covers the threads
     /// that were already running and those started afterwards.
     #[test]
@@ -520,6 +515,11 @@ mod tests {
         assert_eq!(std::thread::spawn(off).join().unwrap(), 1, "a thread started afterwards");
     }
 
+    /// The service relies on threads started after the call inheriting the
+    /// policy (an earlier version asked for reset-on-fork, which the kernel
+    /// also applies to new threads: only the input thread ran realtime and
+    /// the latency got worse). Where realtime scheduling is not permitted,
+    /// the refusal is a permission error the service can report.
     #[test]
     fn realtime_scheduling_is_inherited_by_threads_started_afterwards() {
         fn policy() -> libc::c_int {
