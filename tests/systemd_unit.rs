@@ -5,13 +5,19 @@
 //! `sched_setscheduler`, the one call `realtime_priority` makes, while its
 //! comment promised realtime scheduling up to priority 10.
 //!
-//! The groups are expanded by the system's own `systemd-analyze
+//! Checked two ways: the calls the code makes on purpose (a list), and every
+//! call the daemon makes under `strace` through start, a scrape, SIGHUP and
+//! SIGTERM. The groups are expanded by the system's own `systemd-analyze
 //! syscall-filter`; the assignments are applied as systemd does: the first
 //! sets the mode (an allow list unless it starts with `~`), each later one
-//! adds to or takes from the set.
+//! adds to or takes from the set. Each test skips, saying so, where its tool
+//! is missing.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::process::Command;
+use std::io::{Read, Write};
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
 
 /// The calls the service makes itself, beyond what any program needs: the
 /// realtime request, turning huge pages off, receive stamps on sockets,
@@ -47,12 +53,8 @@ fn expand(item: &str, groups: &BTreeMap<String, Vec<String>>, into: &mut BTreeSe
     }
 }
 
-#[test]
-fn the_units_syscall_filter_allows_what_the_service_calls() {
-    let Some(groups) = groups() else {
-        eprintln!("SKIP: systemd-analyze not available; the unit's filter not checked");
-        return;
-    };
+/// The unit's filter: whether it is an allow list, and the calls it lists.
+fn unit_filter(groups: &BTreeMap<String, Vec<String>>) -> (bool, BTreeSet<String>) {
     let unit =
         std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/systemd/fuse1090.service")).unwrap();
     let mut allow_list = None;
@@ -63,7 +65,7 @@ fn the_units_syscall_filter_allows_what_the_service_calls() {
             None => (false, value),
         };
         let mut calls = BTreeSet::new();
-        items.split_whitespace().for_each(|i| expand(i, &groups, &mut calls));
+        items.split_whitespace().for_each(|i| expand(i, groups, &mut calls));
         let allow_mode = *allow_list.get_or_insert(!deny);
         if deny == allow_mode {
             set.retain(|c| !calls.contains(c));
@@ -71,11 +73,128 @@ fn the_units_syscall_filter_allows_what_the_service_calls() {
             set.extend(calls);
         }
     }
-    let allow_mode = allow_list.expect("the unit filters system calls");
+    (allow_list.expect("the unit filters system calls"), set)
+}
+
+#[test]
+fn the_units_syscall_filter_allows_what_the_service_calls() {
+    let Some(groups) = groups() else {
+        eprintln!("SKIP: systemd-analyze not available; the unit's filter not checked");
+        return;
+    };
+    let (allow_mode, set) = unit_filter(&groups);
     let refused: Vec<&str> = NEEDED.iter().copied().filter(|c| set.contains(*c) != allow_mode).collect();
     assert!(refused.is_empty(), "the unit's filter refuses {refused:?}");
     // What the unit means to refuse stays refused (so the reading above is systemd's).
     for call in ["reboot", "setpriority", "init_module"] {
         assert!(set.contains(call) != allow_mode, "the unit's filter lets {call} through");
     }
+}
+
+/// The daemon itself under `strace`: the demo configuration (eight receivers
+/// replayed over TCP) with realtime scheduling, the Prometheus endpoint
+/// (scraped once), recording, a UDP input and an ASTERIX output, then SIGHUP
+/// and SIGTERM; every system call it made must pass the unit's filter.
+#[test]
+fn the_daemon_makes_no_call_the_units_filter_refuses() {
+    let Some(groups) = groups() else {
+        eprintln!("SKIP: systemd-analyze not available; the unit's filter not checked");
+        return;
+    };
+    if Command::new("strace").arg("-V").output().map_or(true, |o| !o.status.success()) {
+        eprintln!("SKIP: strace not available; the daemon's calls not checked");
+        return;
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = std::env::temp_dir().join(format!("fuse1090-unit-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let port = |_| std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let (metrics, input) = (port(()), port(()));
+    let sink = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let demo = std::fs::read_to_string(root.join("config/demo.toml")).unwrap();
+    let cfg = demo.replacen(
+        "[service]\n",
+        &format!(
+            "[service]\nmetrics_listen = \"127.0.0.1:{metrics}\"\nrealtime_priority = 5\nrecord = \"{}\"\n",
+            dir.join("record.txt").display()
+        ),
+        1,
+    ) + &format!(
+        "\n[[input]]\nkind = \"udp\"\naddress = \"127.0.0.1:{input}\"\nformat = \"beast\"\n\n\
+         [[output]]\nkind = \"udp\"\naddress = \"{}\"\nformat = \"asterix062\"\n",
+        sink.local_addr().unwrap()
+    );
+    let (cfg_path, trace) = (dir.join("cfg.toml"), dir.join("trace.txt"));
+    std::fs::write(&cfg_path, cfg).unwrap();
+    let mut strace = Command::new("strace")
+        .args(["-f", "-qq", "-o"])
+        .arg(&trace)
+        .arg(env!("CARGO_BIN_EXE_fuse1090"))
+        .args(["run", "--config"])
+        .arg(&cfg_path)
+        .current_dir(root)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    // The daemon's pid from its execve in the trace (strace's own children
+    // include short-lived probes of the kernel's ptrace features).
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let daemon: i32 = loop {
+        let text = std::fs::read_to_string(&trace).unwrap_or_default();
+        if let Some(pid) = text
+            .lines()
+            .find(|l| l.contains("execve(") && l.contains("fuse1090"))
+            .and_then(|l| l.split_whitespace().next()?.parse().ok())
+        {
+            break pid;
+        }
+        assert!(Instant::now() < deadline, "strace started no daemon");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    std::thread::sleep(Duration::from_millis(1500));
+    // A Beast frame to the UDP input (a DF11 all-call reply, type 2).
+    let frame = [0x1a, 0x32, 0, 0, 0, 0, 0, 0, 0x80, 0x5d, 0x4c, 0xa4, 0xe5, 0x5a, 0x73, 0x8b];
+    sink.send_to(&frame, ("127.0.0.1", input)).unwrap();
+    let mut scrape = String::new();
+    if let Ok(mut s) = std::net::TcpStream::connect(("127.0.0.1", metrics)) {
+        let _ = s.write_all(b"GET /metrics HTTP/1.0\r\n\r\n");
+        let _ = s.read_to_string(&mut scrape);
+    }
+    // SAFETY: signals to the child this test started.
+    unsafe { libc::kill(daemon, libc::SIGHUP) };
+    std::thread::sleep(Duration::from_millis(1000));
+    unsafe { libc::kill(daemon, libc::SIGTERM) };
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while strace.try_wait().unwrap().is_none() {
+        if Instant::now() > deadline {
+            // SAFETY: as above.
+            unsafe { libc::kill(daemon, libc::SIGKILL) };
+            let _ = strace.kill();
+            let text = std::fs::read_to_string(&trace).unwrap_or_default();
+            let tail: Vec<&str> = text.lines().rev().take(30).collect();
+            panic!("the daemon did not stop on SIGTERM; the trace ends {tail:#?}");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let text = std::fs::read_to_string(&trace).unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(scrape.contains("fuse1090_"), "the metrics endpoint answered: {scrape:.200}");
+    for call in ["sched_setscheduler(", "prctl(PR_SET_THP_DISABLE", "recvmmsg(", "sendto("] {
+        assert!(text.contains(call), "the daemon never called {call}: the run did not cover it");
+    }
+    // `PID name(args) = result`, or `PID <... name resumed> ...`.
+    let calls: BTreeSet<&str> = text
+        .lines()
+        .filter_map(|l| {
+            let rest = l.split_once(' ')?.1.trim_start();
+            let rest = rest.strip_prefix("<... ").unwrap_or(rest);
+            let end = rest.find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))?;
+            (end > 0).then(|| &rest[..end])
+        })
+        .collect();
+    let (allow_mode, set) = unit_filter(&groups);
+    let refused: Vec<&str> = calls.iter().copied().filter(|c| set.contains(*c) != allow_mode).collect();
+    eprintln!("the daemon made {} distinct system calls", calls.len());
+    assert!(refused.is_empty(), "the unit's filter refuses {refused:?} (all: {calls:?})");
 }
