@@ -11,7 +11,8 @@ use fuse1090::feed::InputFormat;
 /// mimalloc, not the system's: its per-thread heaps take the stages' frees
 /// of each other's buffers cheaply, and it backs them with huge pages (the
 /// tracker's table of aircraft is tens of MB of random access), together
-/// 5% off `run --capture` on the scale world (six alternating pairs,
+/// 3-5% off `run --capture` on the scale world (fourteen runs spread over
+/// an hour and six back to back, each beside the system allocator's;
 /// output byte-identical) for 70 MB more memory. The live service turns
 /// the huge pages off again (`live::no_huge_pages`).
 #[global_allocator]

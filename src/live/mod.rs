@@ -85,7 +85,7 @@ pub fn run(config_path: &Path) -> Result<()> {
 /// Turns transparent huge pages off for the whole process.
 ///
 /// Why: the allocator asks for huge pages (`madvise`), which offline saves
-/// a twentieth of `run --capture`'s time in fewer TLB misses, but with the
+/// part of `run --capture`'s time in fewer TLB misses, but with the
 /// kernel's usual `defrag = madvise` the first touch of such a page may
 /// compact memory on the spot, a stall of tens of milliseconds: at 1 M
 /// frames/s (`live_load`) three runs in ten had an ADS-B-only p99 of 21-78
