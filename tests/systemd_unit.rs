@@ -152,14 +152,26 @@ fn the_daemon_makes_no_call_the_units_filter_refuses() {
         assert!(Instant::now() < deadline, "strace started no daemon");
         std::thread::sleep(Duration::from_millis(20));
     };
-    std::thread::sleep(Duration::from_millis(1500));
-    // A Beast frame to the UDP input (a DF11 all-call reply, type 2).
+    // A Beast frame to the UDP input (a DF11 all-call reply, type 2), again
+    // until the daemon has read one (it may not have bound the port yet),
+    // and the metrics scraped once the endpoint answers: waits with a
+    // deadline, not guesses, so a slow machine only takes longer.
     let frame = [0x1a, 0x32, 0, 0, 0, 0, 0, 0, 0x80, 0x5d, 0x4c, 0xa4, 0xe5, 0x5a, 0x73, 0x8b];
-    sink.send_to(&frame, ("127.0.0.1", input)).unwrap();
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while !std::fs::read_to_string(&trace).unwrap_or_default().contains("recvmmsg(")
+        && Instant::now() < deadline
+    {
+        sink.send_to(&frame, ("127.0.0.1", input)).unwrap();
+        std::thread::sleep(Duration::from_millis(100));
+    }
     let mut scrape = String::new();
-    if let Ok(mut s) = std::net::TcpStream::connect(("127.0.0.1", metrics)) {
-        let _ = s.write_all(b"GET /metrics HTTP/1.0\r\n\r\n");
-        let _ = s.read_to_string(&mut scrape);
+    while !scrape.contains("fuse1090_") && Instant::now() < deadline {
+        scrape.clear();
+        if let Ok(mut s) = std::net::TcpStream::connect(("127.0.0.1", metrics)) {
+            let _ = s.write_all(b"GET /metrics HTTP/1.0\r\n\r\n");
+            let _ = s.read_to_string(&mut scrape);
+        }
+        std::thread::sleep(Duration::from_millis(100));
     }
     // SAFETY: signals to the child this test started.
     unsafe { libc::kill(daemon, libc::SIGHUP) };
