@@ -95,11 +95,7 @@ fn no_huge_pages() -> std::io::Result<()> {
     {
         // SAFETY: a plain system call with integer arguments.
         let rc = unsafe { libc::prctl(libc::PR_SET_THP_DISABLE, 1, 0, 0, 0) };
-        if rc == 0 {
-            Ok(())
-        } else {
-            Err(std::io::Error::last_os_error())
-        }
+        Ok(nix::errno::Errno::result(rc).map(drop)?)
     }
     #[cfg(not(target_os = "linux"))]
     {
@@ -128,11 +124,7 @@ fn realtime(priority: u8) -> std::io::Result<()> {
         // SAFETY: a plain system call on the calling thread (pid 0) with a
         // parameter that outlives it.
         let rc = unsafe { libc::sched_setscheduler(0, libc::SCHED_RR, &param) };
-        if rc == 0 {
-            Ok(())
-        } else {
-            Err(std::io::Error::last_os_error())
-        }
+        Ok(nix::errno::Errno::result(rc).map(drop)?)
     }
     #[cfg(not(target_os = "linux"))]
     {
