@@ -23,12 +23,10 @@ use fuse1090::feed::capture::{CaptureReader, ClockKind};
 use fuse1090::sim::scenario::Scenario;
 use serde_json::Value;
 
+mod common;
+
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
 }
 
 fn bin() -> Command {
@@ -244,7 +242,7 @@ for line in open(sys.argv[1]):
 #[test]
 fn daemon_end_to_end_over_loopback_with_faults() {
     let w = world();
-    let ports: Vec<u16> = (0..6).map(|_| free_port()).collect();
+    let ports: Vec<u16> = (0..6).map(|_| common::free_port()).collect();
     let json_sub = UdpSocket::bind("127.0.0.1:0").unwrap();
     let ax_sub = UdpSocket::bind("127.0.0.1:0").unwrap();
     let late_sub = UdpSocket::bind("127.0.0.1:0").unwrap();
@@ -254,7 +252,7 @@ fn daemon_end_to_end_over_loopback_with_faults() {
         late_sub.local_addr().unwrap().port(),
     );
     // An unreachable subscriber first: it must not stop the others.
-    let dead = free_port();
+    let dead = common::free_port();
     let cfg_path = w.dir.join("fuse1090.toml");
     std::fs::write(&cfg_path, config(&w, &ports, &[(dead, "json"), (jp, "json"), (ap, "asterix062")]))
         .unwrap();
@@ -435,7 +433,7 @@ fn daemon_end_to_end_over_loopback_with_faults() {
 fn sighup_moves_a_udp_receiver_to_its_new_source_address() {
     let dir = std::env::temp_dir().join(format!("fuse1090-e2e-hup-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let port = free_port();
+    let port = common::free_port();
     let cfg = |source: &str| {
         format!(
             "[service]\nstats_interval_s = 0.2\n\n[[receiver]]\nid = \"moved\"\nlat = 45.0\nlon = 5.0\n\
@@ -501,7 +499,7 @@ fn sighup_moves_a_udp_receiver_to_its_new_source_address() {
 fn a_beast_server_survives_running_out_of_descriptors_and_keeps_one_connection_per_receiver() {
     let dir = std::env::temp_dir().join(format!("fuse1090-e2e-fds-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let port = free_port();
+    let port = common::free_port();
     let cfg_path = dir.join("fds.toml");
     let mut cfg = format!(
         "[service]\nstats_interval_s = 0.2\n\n[[input]]\nkind = \"beast_tcp_server\"\naddress = \"127.0.0.1:{port}\"\n\n"
@@ -634,7 +632,7 @@ fn a_burst_of_frames_in_one_tcp_read_is_processed_whole() {
     let dir = std::env::temp_dir().join(format!("fuse1090-e2e-burst-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
-    let metrics = std::net::SocketAddr::from(([127, 0, 0, 1], free_port()));
+    let metrics = std::net::SocketAddr::from(([127, 0, 0, 1], common::free_port()));
     let cfg_path = dir.join("burst.toml");
     std::fs::write(
         &cfg_path,

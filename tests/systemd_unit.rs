@@ -19,6 +19,8 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+mod common;
+
 /// The calls the service makes itself, beyond what any program needs: the
 /// realtime request, turning huge pages off, receive stamps on sockets,
 /// batched datagram reads, and the allocator's page advice.
@@ -33,8 +35,9 @@ fn groups() -> Option<BTreeMap<String, Vec<String>>> {
     let mut current = None;
     for line in String::from_utf8_lossy(&out.stdout).lines() {
         if line.starts_with('@') {
-            current = Some(line.trim().to_string());
-            groups.entry(line.trim().to_string()).or_default();
+            let g = line.trim().to_string();
+            groups.entry(g.clone()).or_default();
+            current = Some(g);
         } else if let (Some(g), item) = (&current, line.trim()) {
             if !item.is_empty() && !item.starts_with('#') {
                 groups.get_mut(g).expect("entered").push(item.to_string());
@@ -53,41 +56,54 @@ fn expand(item: &str, groups: &BTreeMap<String, Vec<String>>, into: &mut BTreeSe
     }
 }
 
-/// The unit's filter: whether it is an allow list, and the calls it lists.
-fn unit_filter(groups: &BTreeMap<String, Vec<String>>) -> (bool, BTreeSet<String>) {
-    let unit =
-        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/systemd/fuse1090.service")).unwrap();
-    let mut allow_list = None;
-    let mut set = BTreeSet::new();
-    for value in unit.lines().filter_map(|l| l.trim().strip_prefix("SystemCallFilter=")) {
-        let (deny, items) = match value.strip_prefix('~') {
-            Some(rest) => (true, rest),
-            None => (false, value),
+/// The unit's system-call filter, as systemd builds it.
+struct Filter {
+    /// An allow list (the first assignment has no `~`), or a deny list.
+    allow_list: bool,
+    calls: BTreeSet<String>,
+}
+
+impl Filter {
+    /// The unit's, or `None` (saying so) where `systemd-analyze` is missing.
+    fn of_unit() -> Option<Filter> {
+        let Some(groups) = groups() else {
+            eprintln!("SKIP: systemd-analyze not available; the unit's filter not checked");
+            return None;
         };
-        let mut calls = BTreeSet::new();
-        items.split_whitespace().for_each(|i| expand(i, groups, &mut calls));
-        let allow_mode = *allow_list.get_or_insert(!deny);
-        if deny == allow_mode {
-            set.retain(|c| !calls.contains(c));
-        } else {
-            set.extend(calls);
+        let unit = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/systemd/fuse1090.service"))
+            .unwrap();
+        let mut allow_list = None;
+        let mut set = BTreeSet::new();
+        for value in unit.lines().filter_map(|l| l.trim().strip_prefix("SystemCallFilter=")) {
+            let (deny, items) = match value.strip_prefix('~') {
+                Some(rest) => (true, rest),
+                None => (false, value),
+            };
+            let mut calls = BTreeSet::new();
+            items.split_whitespace().for_each(|i| expand(i, &groups, &mut calls));
+            let allow_mode = *allow_list.get_or_insert(!deny);
+            if deny == allow_mode {
+                set.retain(|c| !calls.contains(c));
+            } else {
+                set.extend(calls);
+            }
         }
+        Some(Filter { allow_list: allow_list.expect("the unit filters system calls"), calls: set })
     }
-    (allow_list.expect("the unit filters system calls"), set)
+
+    fn lets_through(&self, call: &str) -> bool {
+        self.calls.contains(call) == self.allow_list
+    }
 }
 
 #[test]
 fn the_units_syscall_filter_allows_what_the_service_calls() {
-    let Some(groups) = groups() else {
-        eprintln!("SKIP: systemd-analyze not available; the unit's filter not checked");
-        return;
-    };
-    let (allow_mode, set) = unit_filter(&groups);
-    let refused: Vec<&str> = NEEDED.iter().copied().filter(|c| set.contains(*c) != allow_mode).collect();
+    let Some(filter) = Filter::of_unit() else { return };
+    let refused: Vec<&str> = NEEDED.iter().copied().filter(|c| !filter.lets_through(c)).collect();
     assert!(refused.is_empty(), "the unit's filter refuses {refused:?}");
     // What the unit means to refuse stays refused (so the reading above is systemd's).
     for call in ["reboot", "setpriority", "init_module"] {
-        assert!(set.contains(call) != allow_mode, "the unit's filter lets {call} through");
+        assert!(!filter.lets_through(call), "the unit's filter lets {call} through");
     }
 }
 
@@ -97,10 +113,7 @@ fn the_units_syscall_filter_allows_what_the_service_calls() {
 /// and SIGTERM; every system call it made must pass the unit's filter.
 #[test]
 fn the_daemon_makes_no_call_the_units_filter_refuses() {
-    let Some(groups) = groups() else {
-        eprintln!("SKIP: systemd-analyze not available; the unit's filter not checked");
-        return;
-    };
+    let Some(filter) = Filter::of_unit() else { return };
     if Command::new("strace").arg("-V").output().map_or(true, |o| !o.status.success()) {
         eprintln!("SKIP: strace not available; the daemon's calls not checked");
         return;
@@ -108,8 +121,7 @@ fn the_daemon_makes_no_call_the_units_filter_refuses() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let dir = std::env::temp_dir().join(format!("fuse1090-unit-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let port = |_| std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
-    let (metrics, input) = (port(()), port(()));
+    let (metrics, input) = (common::free_port(), common::free_port());
     let sink = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     let demo = std::fs::read_to_string(root.join("config/demo.toml")).unwrap();
     let cfg = demo.replacen(
@@ -205,8 +217,7 @@ fn the_daemon_makes_no_call_the_units_filter_refuses() {
             (end > 0).then(|| &rest[..end])
         })
         .collect();
-    let (allow_mode, set) = unit_filter(&groups);
-    let refused: Vec<&str> = calls.iter().copied().filter(|c| set.contains(*c) != allow_mode).collect();
+    let refused: Vec<&str> = calls.iter().copied().filter(|c| !filter.lets_through(c)).collect();
     eprintln!("the daemon made {} distinct system calls", calls.len());
     assert!(refused.is_empty(), "the unit's filter refuses {refused:?} (all: {calls:?})");
 }

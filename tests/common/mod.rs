@@ -17,6 +17,11 @@ pub fn shared_data(rel: &str) -> Option<PathBuf> {
     }
 }
 
+/// A loopback port free a moment ago (the daemons under test bind it).
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
 /// Every frame of an input, with the arrival time (if the format carries one).
 pub fn frames(bytes: &[u8], format: InputFormat) -> Vec<(Option<f64>, RawFrame)> {
     let mut parser = parser_for(format);
