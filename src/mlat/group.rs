@@ -183,27 +183,32 @@ mod tests {
         crate::feed::frame_from_hex(hex, 5, 1).unwrap()
     }
 
+    /// A receiver of handed-out groups that keeps copies of them.
+    fn keep(out: &mut Vec<Group>) -> impl FnMut(&Group) + '_ {
+        |g| out.push(g.clone())
+    }
+
     #[test]
     fn copies_join_until_the_wait_runs_out() {
         let mut g = Grouper::new(0.2, 100);
         let mut out = Vec::new();
         let a = f("8D4840D6202CC371C32CE0576098");
-        assert_eq!(g.add(0, 10.0, &a, &mut |x: &Group| out.push(x.clone())), Added::New);
-        assert_eq!(g.add(1, 10.05, &a, &mut |x: &Group| out.push(x.clone())), Added::Joined);
-        assert_eq!(g.add(1, 10.06, &a, &mut |x: &Group| out.push(x.clone())), Added::Duplicate);
+        assert_eq!(g.add(0, 10.0, &a, &mut keep(&mut out)), Added::New);
+        assert_eq!(g.add(1, 10.05, &a, &mut keep(&mut out)), Added::Joined);
+        assert_eq!(g.add(1, 10.06, &a, &mut keep(&mut out)), Added::Duplicate);
         // Same bytes from a receiver already in the group, at another time: a new transmission.
         let later = crate::feed::frame_from_hex("8D4840D6202CC371C32CE0576098", 99, 1).unwrap();
-        assert_eq!(g.add(1, 10.07, &later, &mut |x: &Group| out.push(x.clone())), Added::New);
-        assert_eq!(g.add(2, 10.1, &f("5D4840D61F3A2B"), &mut |x: &Group| out.push(x.clone())), Added::New);
-        g.advance(10.19, &mut |x: &Group| out.push(x.clone()));
+        assert_eq!(g.add(1, 10.07, &later, &mut keep(&mut out)), Added::New);
+        assert_eq!(g.add(2, 10.1, &f("5D4840D61F3A2B"), &mut keep(&mut out)), Added::New);
+        g.advance(10.19, &mut keep(&mut out));
         assert!(out.is_empty());
-        g.advance(10.2, &mut |x: &Group| out.push(x.clone()));
+        g.advance(10.2, &mut keep(&mut out));
         assert_eq!(out.len(), 1);
         assert_eq!(out[0].copies.len(), 2);
         // The same bytes after the wait are a new transmission.
-        g.advance(10.7, &mut |x: &Group| out.push(x.clone()));
-        assert_eq!(g.add(0, 10.7, &a, &mut |x: &Group| out.push(x.clone())), Added::New);
-        g.flush(&mut |x: &Group| out.push(x.clone()));
+        g.advance(10.7, &mut keep(&mut out));
+        assert_eq!(g.add(0, 10.7, &a, &mut keep(&mut out)), Added::New);
+        g.flush(&mut keep(&mut out));
         assert_eq!(out.len(), 4);
         assert_eq!(g.stats().duplicate_copies, 1);
     }
@@ -213,11 +218,11 @@ mod tests {
         let mut g = Grouper::new(1.0, 2);
         let mut out = Vec::new();
         for (i, hex) in ["5D4840D61F3A2B", "5D4840D61F3A2C", "5D4840D61F3A2D"].iter().enumerate() {
-            g.add(0, i as f64 * 0.01, &f(hex), &mut |x: &Group| out.push(x.clone()));
+            g.add(0, i as f64 * 0.01, &f(hex), &mut keep(&mut out));
         }
         assert_eq!(out.len(), 1);
         assert_eq!(g.stats().overflow, 1);
         // The evicted group's key is gone: its bytes start a new group.
-        assert_eq!(g.add(1, 0.05, &f("5D4840D61F3A2B"), &mut |x: &Group| out.push(x.clone())), Added::New);
+        assert_eq!(g.add(1, 0.05, &f("5D4840D61F3A2B"), &mut keep(&mut out)), Added::New);
     }
 }
