@@ -2,6 +2,9 @@
 //! receivers, 3,000 aircraft), cut to its first 10 s so one iteration stays
 //! around a second: 1.2 M frames.
 //! - `core`: frames already parsed, through the sans-IO core (frames/s);
+//! - `front`: the same through the core's front stage alone (grouping,
+//!   decoding, clock synchronisation, multilateration), its commands for the
+//!   back stage dropped: the stage that shares a core with the parser;
 //! - `run_capture`: the `run --capture` command itself (file in, parsing,
 //!   the core's front and back stages on threads of their own, JSON lines out).
 //!
@@ -55,6 +58,23 @@ fn bench(c: &mut Criterion) {
             }
             core.finish(&mut events);
             core.stats().positions
+        })
+    });
+    g.bench_function("front", |b| {
+        b.iter(|| {
+            let (mut front, _) = Core::stages(&CoreConfig::default());
+            let mut cmds = Vec::new();
+            for r in &records {
+                match r {
+                    CaptureRecord::Receiver(d) => {
+                        front.add_receiver(d.clone(), &mut cmds);
+                    }
+                    CaptureRecord::Frame(f) => front.on_frame(f.rx, f.arrival, &f.frame, &mut cmds),
+                }
+                cmds.clear();
+            }
+            front.finish(&mut cmds);
+            front.stats().positions
         })
     });
     let dir = std::env::temp_dir().join(format!("fuse1090-bench-{}", std::process::id()));

@@ -71,8 +71,10 @@ impl CoreConfig {
         if !(self.group_wait_s > 0.0 && self.group_wait_s <= 5.0) {
             return Err(format!("group_wait_s = {} must be in (0, 5]", self.group_wait_s));
         }
-        if self.max_pending_groups == 0 {
-            return Err("max_pending_groups must be positive".into());
+        // A pending group is about 400 bytes: ten million is 4 GB, and the
+        // grouper's index numbers pending groups in 32 bits.
+        if !(1..=10_000_000).contains(&self.max_pending_groups) {
+            return Err(format!("max_pending_groups = {} must be in 1..=10000000", self.max_pending_groups));
         }
         if !self.max_range_km.is_finite() || self.max_range_km <= 0.0 {
             return Err(format!("max_range_km = {} must be positive", self.max_range_km));

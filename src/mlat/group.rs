@@ -5,12 +5,13 @@
 //! transmission is decoded, the later ones join its group. Pending groups are
 //! bounded; what is dropped is counted.
 
-use crate::FastMap;
 use std::collections::VecDeque;
 
 use smallvec::{smallvec, SmallVec};
 
 use crate::feed::RawFrame;
+
+use super::pending::{Groups, PendingIndex};
 
 /// One receiver's copy.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -46,13 +47,18 @@ pub struct GroupInfo {
 }
 
 /// All copies of one transmission.
+///
+/// Laid out in this order: the copies' length (after their inline slots)
+/// and the frame's bytes (which confirm an index hit) then share a cache
+/// line, and joining a group reads one line fewer (4% of the front stage).
 #[derive(Clone, Debug, PartialEq)]
+#[repr(C)]
 pub struct Group {
-    pub frame: RawFrame,
-    pub first_arrival: f64,
     /// Inline for the usual handful of receivers: a transmission costs no
     /// allocation, and joining it touches one place in memory.
     pub copies: SmallVec<[Copy; 8]>,
+    pub frame: RawFrame,
+    pub first_arrival: f64,
     pub info: GroupInfo,
 }
 
@@ -80,11 +86,26 @@ pub enum Added {
 pub struct Grouper {
     wait_s: f64,
     max_pending: usize,
-    pending: FastMap<u128, usize>,
-    // Groups in first-arrival order; `base` is the sequence number of the front.
-    queue: VecDeque<Group>,
-    base: usize,
+    pending: PendingIndex,
+    queue: Queue,
     stats: GroupStats,
+}
+
+/// The pending groups in first-arrival order, and the sequence number (mod
+/// 2^32) of the oldest.
+struct Queue {
+    groups: VecDeque<Group>,
+    base: u32,
+}
+
+impl Groups for Queue {
+    fn live(&self, seq: u32) -> bool {
+        (seq.wrapping_sub(self.base) as usize) < self.groups.len()
+    }
+
+    fn has_key(&self, seq: u32, key: u128) -> bool {
+        self.groups[seq.wrapping_sub(self.base) as usize].frame.key() == key
+    }
 }
 
 impl Grouper {
@@ -92,9 +113,8 @@ impl Grouper {
         Grouper {
             wait_s,
             max_pending,
-            pending: FastMap::default(),
-            queue: VecDeque::new(),
-            base: 0,
+            pending: PendingIndex::new(),
+            queue: Queue { groups: VecDeque::new(), base: 0 },
             stats: GroupStats::default(),
         }
     }
@@ -107,8 +127,8 @@ impl Grouper {
         self.stats.copies += 1;
         let copy = Copy { rx, timestamp: frame.timestamp, arrival, signal: frame.signal };
         let k = frame.key();
-        if let Some(&seq) = self.pending.get(&k) {
-            let g = &mut self.queue[seq - self.base];
+        if let Some(seq) = self.pending.find(k, &self.queue) {
+            let g = &mut self.queue.groups[seq.wrapping_sub(self.queue.base) as usize];
             match g.copies.iter().find(|c| c.rx == rx) {
                 None => {
                     g.copies.push(copy);
@@ -124,53 +144,53 @@ impl Grouper {
                 Some(_) => {}
             }
         }
-        if self.queue.len() >= self.max_pending {
+        if self.queue.groups.len() >= self.max_pending {
             self.stats.overflow += 1;
             self.pop_front(done);
         }
         self.stats.groups += 1;
-        self.pending.insert(k, self.base + self.queue.len());
-        self.queue.push_back(Group {
+        let q = &mut self.queue;
+        q.groups.push_back(Group {
             frame: *frame,
             first_arrival: arrival,
             copies: smallvec![copy],
             info: GroupInfo::default(),
         });
+        let (base, seq) = (q.base, q.base.wrapping_add(q.groups.len() as u32 - 1));
+        let all =
+            || q.groups.iter().enumerate().map(move |(i, g)| (g.frame.key(), base.wrapping_add(i as u32)));
+        self.pending.insert(k, seq, q, all);
         Added::New
     }
 
     /// Records what decoding taught about the transmission just added as `New`.
     pub fn set_newest_info(&mut self, info: GroupInfo) {
-        if let Some(g) = self.queue.back_mut() {
+        if let Some(g) = self.queue.groups.back_mut() {
             g.info = info;
         }
     }
 
     /// Hands out every group whose wait has run out by `now`.
     pub fn advance(&mut self, now: f64, done: &mut impl FnMut(&Group)) {
-        while self.queue.front().is_some_and(|g| g.first_arrival + self.wait_s <= now) {
+        while self.queue.groups.front().is_some_and(|g| g.first_arrival + self.wait_s <= now) {
             self.pop_front(done);
         }
     }
 
     pub fn flush(&mut self, done: &mut impl FnMut(&Group)) {
-        while !self.queue.is_empty() {
+        while !self.queue.groups.is_empty() {
             self.pop_front(done);
         }
     }
 
     /// Hands out the oldest group where it lies (moving its 400 bytes out
     /// of the queue for each transmission was 1% of the front stage's time).
+    /// Its entry in the index goes stale with it.
     fn pop_front(&mut self, done: &mut impl FnMut(&Group)) {
-        if let Some(g) = self.queue.front() {
-            let k = g.frame.key();
-            // A later group with the same bytes may own the key now.
-            if self.pending.get(&k) == Some(&self.base) {
-                self.pending.remove(&k);
-            }
-            self.base += 1;
+        if let Some(g) = self.queue.groups.front() {
             done(g);
-            self.queue.pop_front();
+            self.queue.groups.pop_front();
+            self.queue.base = self.queue.base.wrapping_add(1);
         }
     }
 }

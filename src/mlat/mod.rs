@@ -6,6 +6,7 @@
 pub mod clock;
 pub mod engine;
 pub mod group;
+mod pending;
 pub mod solver;
 pub mod sync;
 
