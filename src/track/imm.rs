@@ -19,6 +19,13 @@ use super::models::MotionModel;
 /// and a heap allocation per copy cost more than the copy itself.
 pub type PerModel<T> = SmallVec<[T; 4]>;
 
+/// Steps closer than this (s) are one instant: the ADS-B position and the
+/// MLAT fix of one transmission are dated a propagation time apart (at most
+/// about 2 ms). The switching matrix is per step, so applying it between
+/// them would let the models switch twice per transmission heard both ways:
+/// a fused track would switch twice as often as either source's.
+pub const SAME_INSTANT_S: f64 = 0.005;
+
 /// The models and their Markov switching matrix.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ImmSpec {
@@ -91,6 +98,9 @@ impl Imm {
     /// combined prediction and try several noise levels (VB) without
     /// predicting again.
     pub fn prepare(&self, dt: f64) -> Prepared {
+        if dt.abs() < SAME_INSTANT_S {
+            return self.prepare_unmixed(dt);
+        }
         let (n, tr) = (self.spec.models.len(), &self.spec.transition);
         let c: PerModel<f64> = (0..n).map(|j| (0..n).map(|i| tr[(i, j)] * self.mu[i]).sum()).collect();
         // Each prediction written where it stays (collecting them moved
@@ -151,6 +161,23 @@ impl Imm {
         // Every caller needs it (gate, NIS, linearisation): computed once.
         let combined = combine(&predicted, &c);
         Prepared { c, predicted, combined }
+    }
+
+    /// A step within `SAME_INSTANT_S` of the last: the models cannot have
+    /// switched in between, so no mixing; each model goes on from its own
+    /// posterior with its own probability.
+    fn prepare_unmixed(&self, dt: f64) -> Prepared {
+        let predicted: PerModel<Gaussian> = self
+            .filters
+            .iter()
+            .zip(&self.spec.models)
+            .map(|(g, model)| {
+                let (x, p) = model.predict(dt, &g.x, &g.p);
+                Gaussian { x, p }
+            })
+            .collect();
+        let combined = combine(&predicted, &self.mu);
+        Prepared { c: self.mu.clone(), predicted, combined }
     }
 
     /// The combined prediction over `dt`, without changing the filter.
@@ -267,7 +294,7 @@ pub fn combine(parts: &[Gaussian], w: &[f64]) -> Gaussian {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{Matrix2, Vector2};
+    use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
 
     /// Straight flight and turns either way at about 3 deg/s.
     fn straight_and_turns() -> Vec<MotionModel> {
@@ -346,6 +373,61 @@ mod tests {
                     "offset {offset}, model {j}: {} vs {want}",
                     imm.mu[j]
                 );
+            }
+        }
+    }
+
+    /// The ADS-B position and the MLAT fix of one transmission, applied one
+    /// after the other, are the same step as both applied at once: the
+    /// second must not mix the models again.
+    #[test]
+    fn two_measurements_of_one_instant_are_one_step() {
+        let models = straight_and_turns();
+        let filter = |k: f64| Gaussian {
+            x: Vector6::new(30.0 * k, 10.0 * k, 200.0 - k, 5.0 * k, 0.1 * k, -0.2),
+            p: Matrix6::from_diagonal(&Vector6::new(50.0, 60.0, 4.0, 5.0, 0.1, 0.1)),
+        };
+        let mut imm = Imm::new(models, Imm::sticky(3, 0.8), filter(0.0));
+        imm.filters = smallvec::smallvec![filter(0.0), filter(1.0), filter(2.0)];
+        imm.mu = smallvec::smallvec![0.5, 0.3, 0.2];
+        let adsb = PosMeasurement { z: Vector2::new(215.0, 12.0), r: Matrix2::identity() * 900.0 }.linear();
+        let fix =
+            PosMeasurement { z: Vector2::new(240.0, 20.0), r: Matrix2::new(80.0, 10.0, 10.0, 60.0) }.linear();
+        let mut both = Linear::<4> {
+            h: SMatrix::<f64, 4, 6>::zeros(),
+            z: SVector::<f64, 4>::zeros(),
+            r: SMatrix::<f64, 4, 4>::zeros(),
+        };
+        for (k, m) in [&adsb, &fix].into_iter().enumerate() {
+            both.h.fixed_view_mut::<2, 6>(2 * k, 0).copy_from(&m.h);
+            both.z.fixed_rows_mut::<2>(2 * k).copy_from(&m.z);
+            both.r.fixed_view_mut::<2, 2>(2 * k, 2 * k).copy_from(&m.r);
+        }
+        let mut joint = imm.clone();
+        let prep = joint.prepare(1.0);
+        joint.update(&prep, &both).unwrap();
+        // The fix is dated at emission, the report at its first reception:
+        // a fraction of a millisecond apart (0.04 m of flight here).
+        for (gap, tol) in [(0.0, 1e-9), (0.0002, 1e-3)] {
+            let mut seq = imm.clone();
+            let prep = seq.prepare(1.0);
+            seq.update(&prep, &adsb).unwrap();
+            let prep = seq.prepare(gap);
+            seq.update(&prep, &fix).unwrap();
+            for j in 0..3 {
+                // Position and velocity: a turn model's prediction makes its
+                // acceleration from the velocity, whatever the interval.
+                let (a, b) = (seq.filters[j], joint.filters[j]);
+                let (ax, bx) = (a.x.fixed_rows::<4>(0), b.x.fixed_rows::<4>(0));
+                let (ap, bp) = (a.p.fixed_view::<4, 4>(0, 0), b.p.fixed_view::<4, 4>(0, 0));
+                assert!(
+                    (seq.mu[j] - joint.mu[j]).abs() < tol,
+                    "gap {gap}, model {j}: {} vs {}",
+                    seq.mu[j],
+                    joint.mu[j]
+                );
+                assert!((ax - bx).amax() < 50.0 * tol, "gap {gap}, model {j}: {ax} vs {bx}");
+                assert!((ap - bp).amax() < tol * bp.amax(), "gap {gap}, model {j}: {ap} vs {bp}");
             }
         }
     }
