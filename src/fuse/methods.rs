@@ -228,4 +228,23 @@ mod tests {
         assert!((r.p[(0, 0)] - expect).abs() < 1e-9 && r.p[(0, 0)] < 20.0);
         assert!(r.x[0] > c.x[0]);
     }
+
+    /// A covariance that is not positive definite (a filter gone bad) is
+    /// fused by no method: the caller then publishes the better track.
+    #[test]
+    fn no_method_fuses_a_covariance_that_is_not_positive_definite() {
+        let good = g(0.0, 25.0);
+        let mut bad = g(10.0, 100.0);
+        bad.p[(1, 1)] = -4.0;
+        for (x, y) in [(&good, &bad), (&bad, &good)] {
+            assert!(convex(x, y).is_none());
+            assert!(information(x, y, &Matrix6::zeros()).is_none());
+            assert!(ci(x, y).is_none());
+            assert!(reweighted(x, y).is_none());
+        }
+        // And a pair of good ones is (the check above is not vacuous).
+        let other = g(10.0, 100.0);
+        assert!(convex(&good, &other).is_some() && information(&good, &other, &Matrix6::zeros()).is_some());
+        assert!(ci(&good, &other).is_some() && reweighted(&good, &other).is_some());
+    }
 }

@@ -149,7 +149,9 @@ pub struct FuseStats {
     pub tracks_created: u64,
     pub tracks_dropped: u64,
     pub published: u64,
-    /// Fusion of two tracks impossible (covariance, time): the better single track published.
+    /// Fusion of two tracks impossible (a covariance not positive definite,
+    /// or one track's newest position older than the coasting limit): the
+    /// better single track published, once per publication.
     pub fusion_fallbacks: u64,
     /// Conformance flags raised (the monitor itself runs in the core's
     /// front stage, which also keeps flagged ADS-B out of clock sync).
@@ -738,6 +740,13 @@ impl Fuser {
                 .flatten()
         };
         let (adsb, mlat) = (single(Source::Adsb), single(Source::Mlat));
+        // A confirmed track whose source is still heard of (within the
+        // sources window) but whose newest position is older than the
+        // coasting limit: predicting it that far is not aligning it.
+        let stale = |s: Source| {
+            let age = t - a.last_source_t[s as usize];
+            a.single[s as usize].stage == Stage::Confirmed && age > coast && age <= window
+        };
         let fused = match self.cfg.method {
             Method::Measurement => a.fused.estimate_at(t),
             method => match (adsb.filter(|_| !a.adsb_suspect), mlat) {
@@ -753,7 +762,15 @@ impl Fuser {
                         Some(methods::better(&x, &y))
                     }
                 },
-                (x, y) => x.or(y),
+                (x, y) => {
+                    // (ADS-B left out as suspect is left out on purpose.)
+                    let missing = if x.is_none() { Source::Adsb } else { Source::Mlat };
+                    let suspect = missing == Source::Adsb && a.adsb_suspect;
+                    if x.is_some() != y.is_some() && stale(missing) && !suspect {
+                        self.stats.fusion_fallbacks += 1;
+                    }
+                    x.or(y)
+                }
             },
         };
         let report = |source: &'static str, est: Estimate, sources: Sources| TrackReport {
@@ -866,7 +883,14 @@ mod tests {
     /// and the stats.
     fn mlat_fed_flight(hold_s: f64, mlat_s: f64) -> (Vec<(f64, f64)>, FuseStats) {
         let cfg = FuseConfig { mlat_hold_s: hold_s, ..FuseConfig::default() };
-        let mut f = Fuser::new(cfg, TrackConfig::default(), false);
+        let (published, stats) = flight(cfg, false, mlat_s);
+        (published.iter().map(|(now, r)| (*now, r.est.t)).collect(), stats)
+    }
+
+    /// The flight of [`mlat_fed_flight`] through a fuser of `cfg`: every
+    /// track record with its arrival time, and the stats.
+    fn flight(cfg: FuseConfig, source_tracks: bool, mlat_s: f64) -> (Vec<(f64, TrackReport)>, FuseStats) {
+        let mut f = Fuser::new(cfg, TrackConfig::default(), source_tracks);
         let at = |t: f64| crate::geo::displace(45.0, 5.0, 3000.0, [200.0 * (t - 100.0), 0.0, 0.0]);
         let mut arrivals: Vec<(f64, Measurement)> = Vec::new();
         for k in 0..120 {
@@ -884,7 +908,7 @@ mod tests {
         let mut collect = |out: &mut Vec<Output>, now: f64| {
             for o in out.drain(..) {
                 if let Output::Track(r) = o {
-                    published.push((now, r.est.t));
+                    published.push((now, *r));
                 }
             }
         };
@@ -896,6 +920,38 @@ mod tests {
         f.finish(&mut out);
         collect(&mut out, f64::INFINITY);
         (published, *f.stats())
+    }
+
+    /// Track-to-track fusion of a pair too far apart in time: once the MLAT
+    /// track's newest fix is older than the coasting limit, the fresh ADS-B
+    /// track goes out as it is, and each such publication is counted until
+    /// the MLAT source leaves the sources window.
+    #[test]
+    fn a_pair_too_far_apart_to_align_is_not_fused_and_is_counted() {
+        let cfg = FuseConfig { method: Method::Convex, ..FuseConfig::default() };
+        let (coast, window) = (TrackConfig::default().coast_after_s, cfg.sources_window_s);
+        let (published, stats) = flight(cfg, true, 20.0);
+        let last_fix = 100.0 + 19.5 + 0.25;
+        // Fused and ADS-B records of the same publication, by track time.
+        let pairs: Vec<(f64, &TrackReport, &TrackReport)> = published
+            .iter()
+            .filter(|(_, r)| r.source == "fused")
+            .filter_map(|(_, fused)| {
+                let adsb = published.iter().find(|(_, r)| r.source == "adsb" && r.est.t == fused.est.t)?;
+                Some((fused.est.t - last_fix, fused, &adsb.1))
+            })
+            .collect();
+        let same = |a: &TrackReport, b: &TrackReport| {
+            a.est.state.x == b.est.state.x && a.est.state.p == b.est.state.p
+        };
+        // Fused while both are fresh, once the MLAT track is confirmed (its
+        // third fix, at about 102.75).
+        let fused_while_both =
+            pairs.iter().filter(|(age, ..)| (-15.0..0.0).contains(age)).collect::<Vec<_>>();
+        assert!(fused_while_both.len() > 20 && fused_while_both.iter().all(|(_, f, a)| !same(f, a)));
+        let unaligned: Vec<_> = pairs.iter().filter(|(age, ..)| *age > coast && *age <= window).collect();
+        assert!(unaligned.len() >= 10 && unaligned.iter().all(|(_, f, a)| same(f, a)), "{}", unaligned.len());
+        assert_eq!(stats.fusion_fallbacks, unaligned.len() as u64, "{stats:?}");
     }
 
     #[test]

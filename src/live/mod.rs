@@ -447,7 +447,8 @@ fn stats_line(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outp
     let out_err: u64 = outputs.dests.iter().map(|d| d.errors).sum();
     tracing::info!(
         "stats: frames {} [{}], messages {}, aircraft {}, tracks {}, fixes {} ({:.1}/s), suspects {}, conflicts {}, \
-         unknown senders {}, socket errors {}, queue drops {}, output errors {}, mlat {}",
+         rejected measurements {}, fusion fallbacks {}, unknown senders {}, socket errors {}, queue drops {}, \
+         output errors {}, mlat {}",
         s.frames,
         per_rx.join(" "),
         s.messages,
@@ -457,6 +458,8 @@ fn stats_line(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outp
         s.fixes as f64 / span_s.max(1e-9),
         f.suspect_flags,
         f.conflicts,
+        f.rejected_non_finite + f.rejected_speed + f.rejected_time + f.too_late + f.table_full,
+        f.fusion_fallbacks,
         reg.unknown_senders.load(Ordering::Relaxed),
         reg.socket_errors.load(Ordering::Relaxed),
         reg.queue_drops.load(Ordering::Relaxed),
@@ -489,6 +492,20 @@ fn metrics(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outputs
     let f = back.fuser().stats();
     metrics::counter!("fuse1090_tracks_published_total").absolute(f.published);
     metrics::counter!("fuse1090_adsb_suspect_flags_total").absolute(f.suspect_flags);
+    // What the tracker turned away or could not do, each by its reason:
+    // the counted skips of bad input, where a user looks first.
+    for (reason, n) in [
+        ("non_finite", f.rejected_non_finite),
+        ("speed", f.rejected_speed),
+        ("time", f.rejected_time),
+        ("too_late", f.too_late),
+        ("gated", f.gated),
+        ("table_full", f.table_full),
+    ] {
+        metrics::counter!("fuse1090_measurements_rejected_total", "reason" => reason).absolute(n);
+    }
+    metrics::counter!("fuse1090_track_restarts_total").absolute(f.restarts);
+    metrics::counter!("fuse1090_fusion_fallbacks_total").absolute(f.fusion_fallbacks);
     metrics::counter!("fuse1090_output_errors_total").absolute(outputs.dests.iter().map(|d| d.errors).sum());
 }
 
