@@ -1120,6 +1120,39 @@ mod tests {
         assert!(s < 5.0, "scale {s}");
     }
 
+    /// A filter gone numerically bad (here a covariance made indefinite, as
+    /// rounding could) is restarted on the next position, never updated
+    /// further nor estimated from, and the track carries on healthy.
+    #[test]
+    fn a_filter_gone_bad_is_restarted_not_used() {
+        let mut tr = track();
+        for k in 0..10 {
+            let t = k as f64;
+            let (lat, lon) = truth(t);
+            assert!(matches!(tr.apply(pos(t, lat, lon, 10.0)), Outcome::Applied { .. }));
+        }
+        assert!(tr.estimate_at(9.0).is_some());
+        for f in tr.state.imm.as_mut().unwrap().filters.iter_mut() {
+            f.p[(0, 0)] = -1e4;
+        }
+        assert!(tr.estimate_at(9.0).is_none(), "estimated from a bad filter");
+        let (lat, lon) = truth(10.0);
+        assert_eq!(tr.apply(pos(10.0, lat, lon, 10.0)), Outcome::Restarted);
+        assert_eq!(tr.restarts, 1);
+        // Started again on that position, or nothing yet.
+        let near = |e: Estimate| e.state.healthy() && crate::geo::distance_m(lat, lon, e.lat, e.lon) < 30.0;
+        assert!(tr.estimate_at(10.0).is_none_or(near));
+        for k in 11..20 {
+            let t = k as f64;
+            let (lat, lon) = truth(t);
+            tr.apply(pos(t, lat, lon, 10.0));
+        }
+        let e = tr.estimate_at(19.0).unwrap();
+        let (lat, lon) = truth(19.0);
+        assert!(e.state.healthy() && crate::geo::distance_m(lat, lon, e.lat, e.lon) < 30.0);
+        assert_eq!(tr.restarts, 1);
+    }
+
     #[test]
     fn time_differences_alone_keep_a_track_on_the_truth() {
         use rand::SeedableRng;
