@@ -337,19 +337,24 @@ mod tests {
     /// model's log-likelihood and prior, where plain likelihoods underflow
     /// too (a measurement kilometres from every model) and for a model the
     /// transition matrix makes impossible.
-    #[test]
-    fn model_probabilities_are_the_normalised_likelihoods_however_far_the_measurement() {
-        let models = straight_and_turns();
+    /// Three models whose filters disagree, with probabilities 0.5, 0.3, 0.2.
+    fn disagreeing(transition: DMatrix<f64>) -> Imm {
         let filter = |k: f64| Gaussian {
             x: Vector6::new(30.0 * k, 10.0 * k, 200.0 - k, 5.0 * k, 0.1 * k, -0.2),
             p: Matrix6::from_diagonal(&Vector6::new(50.0, 60.0, 4.0, 5.0, 0.1, 0.1)),
         };
+        let mut imm = Imm::new(straight_and_turns(), transition, filter(0.0));
+        imm.filters = smallvec::smallvec![filter(0.0), filter(1.0), filter(2.0)];
+        imm.mu = smallvec::smallvec![0.5, 0.3, 0.2];
+        imm
+    }
+
+    #[test]
+    fn model_probabilities_are_the_normalised_likelihoods_however_far_the_measurement() {
         // Nothing switches into the second model.
         let closed = DMatrix::from_row_slice(3, 3, &[0.9, 0.0, 0.1, 0.1, 0.0, 0.9, 0.2, 0.0, 0.8]);
         for (transition, offset) in [(Imm::sticky(3, 0.9), 5.0), (Imm::sticky(3, 0.9), 3e4), (closed, 40.0)] {
-            let mut imm = Imm::new(models.clone(), transition, filter(0.0));
-            imm.filters = smallvec::smallvec![filter(0.0), filter(1.0), filter(2.0)];
-            imm.mu = smallvec::smallvec![0.5, 0.3, 0.2];
+            let mut imm = disagreeing(transition);
             let prep = imm.prepare(1.0);
             let target = prep.predicted[1].x;
             let m = PosMeasurement {
@@ -382,14 +387,7 @@ mod tests {
     /// second must not mix the models again.
     #[test]
     fn two_measurements_of_one_instant_are_one_step() {
-        let models = straight_and_turns();
-        let filter = |k: f64| Gaussian {
-            x: Vector6::new(30.0 * k, 10.0 * k, 200.0 - k, 5.0 * k, 0.1 * k, -0.2),
-            p: Matrix6::from_diagonal(&Vector6::new(50.0, 60.0, 4.0, 5.0, 0.1, 0.1)),
-        };
-        let mut imm = Imm::new(models, Imm::sticky(3, 0.8), filter(0.0));
-        imm.filters = smallvec::smallvec![filter(0.0), filter(1.0), filter(2.0)];
-        imm.mu = smallvec::smallvec![0.5, 0.3, 0.2];
+        let imm = disagreeing(Imm::sticky(3, 0.8));
         let adsb = PosMeasurement { z: Vector2::new(215.0, 12.0), r: Matrix2::identity() * 900.0 }.linear();
         let fix =
             PosMeasurement { z: Vector2::new(240.0, 20.0), r: Matrix2::new(80.0, 10.0, 10.0, 60.0) }.linear();
