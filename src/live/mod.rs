@@ -499,11 +499,12 @@ fn metrics(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outputs
         ("speed", f.rejected_speed),
         ("time", f.rejected_time),
         ("too_late", f.too_late),
-        ("gated", f.gated),
         ("table_full", f.table_full),
     ] {
         metrics::counter!("fuse1090_measurements_rejected_total", "reason" => reason).absolute(n);
     }
+    // Outside a track's gate: the outliers of normal operation, not bad input.
+    metrics::counter!("fuse1090_measurements_gated_total").absolute(f.gated);
     metrics::counter!("fuse1090_track_restarts_total").absolute(f.restarts);
     metrics::counter!("fuse1090_fusion_fallbacks_total").absolute(f.fusion_fallbacks);
     metrics::counter!("fuse1090_output_errors_total").absolute(outputs.dests.iter().map(|d| d.errors).sum());

@@ -333,10 +333,6 @@ mod tests {
         }
     }
 
-    /// Model probabilities after an update against log-sum-exp over each
-    /// model's log-likelihood and prior, where plain likelihoods underflow
-    /// too (a measurement kilometres from every model) and for a model the
-    /// transition matrix makes impossible.
     /// Three models whose filters disagree, with probabilities 0.5, 0.3, 0.2.
     fn disagreeing(transition: DMatrix<f64>) -> Imm {
         let filter = |k: f64| Gaussian {
@@ -349,6 +345,10 @@ mod tests {
         imm
     }
 
+    /// Model probabilities after an update against log-sum-exp over each
+    /// model's log-likelihood and prior, where plain likelihoods underflow
+    /// too (a measurement kilometres from every model) and for a model the
+    /// transition matrix makes impossible.
     #[test]
     fn model_probabilities_are_the_normalised_likelihoods_however_far_the_measurement() {
         // Nothing switches into the second model.
