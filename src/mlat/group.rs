@@ -98,13 +98,26 @@ struct Queue {
     base: u32,
 }
 
+impl Queue {
+    /// Where the group numbered `seq` lies in the queue (past its end when
+    /// handed out).
+    fn offset(&self, seq: u32) -> usize {
+        seq.wrapping_sub(self.base) as usize
+    }
+}
+
 impl Groups for Queue {
     fn live(&self, seq: u32) -> bool {
-        (seq.wrapping_sub(self.base) as usize) < self.groups.len()
+        self.offset(seq) < self.groups.len()
     }
 
     fn has_key(&self, seq: u32, key: u128) -> bool {
-        self.groups[seq.wrapping_sub(self.base) as usize].frame.key() == key
+        self.groups[self.offset(seq)].frame.key() == key
+    }
+
+    fn pending(&self) -> impl ExactSizeIterator<Item = (u128, u32)> {
+        let base = self.base;
+        self.groups.iter().enumerate().map(move |(i, g)| (g.frame.key(), base.wrapping_add(i as u32)))
     }
 }
 
@@ -128,7 +141,8 @@ impl Grouper {
         let copy = Copy { rx, timestamp: frame.timestamp, arrival, signal: frame.signal };
         let k = frame.key();
         if let Some(seq) = self.pending.find(k, &self.queue) {
-            let g = &mut self.queue.groups[seq.wrapping_sub(self.queue.base) as usize];
+            let i = self.queue.offset(seq);
+            let g = &mut self.queue.groups[i];
             match g.copies.iter().find(|c| c.rx == rx) {
                 None => {
                     g.copies.push(copy);
@@ -156,10 +170,8 @@ impl Grouper {
             copies: smallvec![copy],
             info: GroupInfo::default(),
         });
-        let (base, seq) = (q.base, q.base.wrapping_add(q.groups.len() as u32 - 1));
-        let all =
-            || q.groups.iter().enumerate().map(move |(i, g)| (g.frame.key(), base.wrapping_add(i as u32)));
-        self.pending.insert(k, seq, q, all);
+        let seq = q.base.wrapping_add(q.groups.len() as u32 - 1);
+        self.pending.insert(k, seq, q);
         Added::New
     }
 

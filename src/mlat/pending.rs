@@ -31,6 +31,9 @@ pub(super) trait Groups {
     fn live(&self, seq: u32) -> bool;
     /// Whether the (pending) group's bytes are `key`.
     fn has_key(&self, seq: u32, key: u128) -> bool;
+    /// Every pending group's key and sequence number, oldest first (what a
+    /// rebuild indexes).
+    fn pending(&self) -> impl ExactSizeIterator<Item = (u128, u32)>;
 }
 
 impl PendingIndex {
@@ -65,16 +68,12 @@ impl PendingIndex {
         }
     }
 
-    /// Maps `key` to `seq`, replacing the entry of an older pending group
-    /// with the same bytes. `pending` lists every pending group's key and
-    /// sequence number, oldest first, for a rebuild.
-    pub(super) fn insert<I>(&mut self, key: u128, seq: u32, groups: &impl Groups, pending: impl FnOnce() -> I)
-    where
-        I: ExactSizeIterator<Item = (u128, u32)>,
-    {
+    /// Maps `key` to `seq` (a pending group already), replacing the entry
+    /// of an older pending group with the same bytes.
+    pub(super) fn insert(&mut self, key: u128, seq: u32, groups: &impl Groups) {
         // Rebuilt at five eighths full: linear probing stays short.
         if (self.filled + 1) * 8 > self.slots.len() * 5 {
-            let pending = pending();
+            let pending = groups.pending();
             let len = (pending.len() * 4).next_power_of_two().max(MIN_SLOTS);
             self.slots.clear();
             self.slots.resize(len, EMPTY);
@@ -127,15 +126,17 @@ mod tests {
         fn has_key(&self, seq: u32, key: u128) -> bool {
             self.keys[seq.wrapping_sub(self.base) as usize] == key
         }
+        fn pending(&self) -> impl ExactSizeIterator<Item = (u128, u32)> {
+            let base = self.base;
+            self.keys.iter().enumerate().map(move |(i, &k)| (k, base.wrapping_add(i as u32)))
+        }
     }
 
     impl Queue {
         fn push(&mut self, index: &mut PendingIndex, key: u128) -> u32 {
             let seq = self.base.wrapping_add(self.keys.len() as u32);
             self.keys.push(key);
-            let base = self.base;
-            let all = || self.keys.iter().enumerate().map(move |(i, &k)| (k, base.wrapping_add(i as u32)));
-            index.insert(key, seq, self, all);
+            index.insert(key, seq, self);
             seq
         }
         fn pop(&mut self) {
