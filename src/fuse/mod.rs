@@ -163,6 +163,20 @@ pub struct FuseStats {
     pub conflicts: u64,
 }
 
+impl FuseStats {
+    /// The measurements turned away as bad input, by reason: what the
+    /// service exports and sums in its stats line.
+    pub fn rejected(&self) -> [(&'static str, u64); 5] {
+        [
+            ("non_finite", self.rejected_non_finite),
+            ("speed", self.rejected_speed),
+            ("time", self.rejected_time),
+            ("too_late", self.too_late),
+            ("table_full", self.table_full),
+        ]
+    }
+}
+
 /// Most measurements of one aircraft waiting for the MLAT hold (about seven
 /// a second arrive): a flood is applied early rather than grown without bound.
 const MAX_WAITING: usize = 32;
@@ -727,26 +741,24 @@ impl Fuser {
         };
         let period = a.period_s(&self.tcfg);
         let window = self.cfg.sources_window_s;
+        // Time since the source's newest position.
+        let age = |s: Source| t - a.last_source_t[s as usize];
         let sources = [Source::Adsb, Source::Mlat]
             .into_iter()
-            .filter(|s| t - a.last_source_t[*s as usize] <= window)
+            .filter(|&s| age(s) <= window)
             .map(Source::name)
             .collect();
         // A coasting single-source track (no position lately) is not fused.
         let coast = self.tcfg.coast_after_s;
+        let confirmed = |s: Source| a.single[s as usize].stage == Stage::Confirmed;
         let single = |s: Source| {
-            (t - a.last_source_t[s as usize] <= coast && a.single[s as usize].stage == Stage::Confirmed)
-                .then(|| a.single[s as usize].estimate_at(t))
-                .flatten()
+            (age(s) <= coast && confirmed(s)).then(|| a.single[s as usize].estimate_at(t)).flatten()
         };
         let (adsb, mlat) = (single(Source::Adsb), single(Source::Mlat));
         // A confirmed track whose source is still heard of (within the
         // sources window) but whose newest position is older than the
         // coasting limit: predicting it that far is not aligning it.
-        let stale = |s: Source| {
-            let age = t - a.last_source_t[s as usize];
-            a.single[s as usize].stage == Stage::Confirmed && age > coast && age <= window
-        };
+        let stale = |s: Source| confirmed(s) && age(s) > coast && age(s) <= window;
         let fused = match self.cfg.method {
             Method::Measurement => a.fused.estimate_at(t),
             method => match (adsb.filter(|_| !a.adsb_suspect), mlat) {
@@ -786,8 +798,7 @@ impl Fuser {
             adsb_suspect: a.adsb_suspect,
             flight: a.flight.clone(),
             squawk: a.squawk,
-            ages_s: [Source::Adsb, Source::Mlat]
-                .map(|s| Some((t - a.last_source_t[s as usize]).max(0.0)).filter(|age| *age <= window)),
+            ages_s: [Source::Adsb, Source::Mlat].map(|s| Some(age(s).max(0.0)).filter(|age| *age <= window)),
         };
         if let Some(est) = fused {
             out.push(Output::Track(Box::new(report("fused", est, sources))));

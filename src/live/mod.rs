@@ -458,7 +458,7 @@ fn stats_line(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outp
         s.fixes as f64 / span_s.max(1e-9),
         f.suspect_flags,
         f.conflicts,
-        f.rejected_non_finite + f.rejected_speed + f.rejected_time + f.too_late + f.table_full,
+        f.rejected().iter().map(|(_, n)| n).sum::<u64>(),
         f.fusion_fallbacks,
         reg.unknown_senders.load(Ordering::Relaxed),
         reg.socket_errors.load(Ordering::Relaxed),
@@ -494,13 +494,7 @@ fn metrics(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outputs
     metrics::counter!("fuse1090_adsb_suspect_flags_total").absolute(f.suspect_flags);
     // What the tracker turned away or could not do, each by its reason:
     // the counted skips of bad input, where a user looks first.
-    for (reason, n) in [
-        ("non_finite", f.rejected_non_finite),
-        ("speed", f.rejected_speed),
-        ("time", f.rejected_time),
-        ("too_late", f.too_late),
-        ("table_full", f.table_full),
-    ] {
+    for (reason, n) in f.rejected() {
         metrics::counter!("fuse1090_measurements_rejected_total", "reason" => reason).absolute(n);
     }
     // Outside a track's gate: the outliers of normal operation, not bad input.
