@@ -85,8 +85,8 @@ fn surface_positions_with_a_reference() {
         );
         text += &format!("{}.0 {}\n", 1000 + k, fuse1090::feed::RawFrame::new(&f, 0, 0).unwrap().hex());
     }
-    let dir = std::env::temp_dir().join(format!("fuse1090-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let work = common::scratch("cli");
+    let dir = work.path();
     let path = dir.join("surface.txt");
     std::fs::write(&path, text).unwrap();
     let out = fuse1090()

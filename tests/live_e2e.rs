@@ -114,15 +114,14 @@ fn collect(sock: &UdpSocket, until: Instant, out: &mut Vec<Vec<u8>>) {
 }
 
 struct World {
-    dir: PathBuf,
+    dir: tempfile::TempDir,
     capture: PathBuf,
     truth: Vec<Value>,
     receivers: Vec<(String, f64, f64, f64, ClockKind)>,
 }
 
 fn world() -> World {
-    let dir = std::env::temp_dir().join(format!("fuse1090-e2e-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch("e2e");
     let mut s = Scenario::load(&root().join("fixtures/scenarios/tma-busy.toml")).unwrap();
     s.duration_s = 30.0;
     // The restarting receiver (rx08, a TCP-server sender here) restarts 12 s in.
@@ -133,7 +132,7 @@ fn world() -> World {
     }
     let (mut cap, mut truth) = (Vec::new(), Vec::new());
     fuse1090::sim::simulate(&s, &mut cap, &mut truth).unwrap();
-    let capture = dir.join("capture.txt");
+    let capture = dir.path().join("capture.txt");
     std::fs::write(&capture, &cap).unwrap();
     let mut reader = CaptureReader::new(cap.as_slice(), "capture");
     while reader.next_record().unwrap().is_some() {}
@@ -149,7 +148,7 @@ fn config(w: &World, ports: &[u16], outputs: &[(u16, &str)]) -> String {
     let (server, udp) = (ports[0], ports[1]);
     let mut c = format!(
         "[service]\nstats_interval_s = 1.0\nrecord = \"{}\"\n\n",
-        w.dir.join("recorded.txt").display()
+        w.dir.path().join("recorded.txt").display()
     );
     for (i, (id, lat, lon, alt, clock)) in w.receivers.iter().enumerate() {
         let clock = if *clock == ClockKind::Gps { "gps" } else { "beast12" };
@@ -253,13 +252,13 @@ fn daemon_end_to_end_over_loopback_with_faults() {
     );
     // An unreachable subscriber first: it must not stop the others.
     let dead = common::free_port();
-    let cfg_path = w.dir.join("fuse1090.toml");
+    let cfg_path = w.dir.path().join("fuse1090.toml");
     std::fs::write(&cfg_path, config(&w, &ports, &[(dead, "json"), (jp, "json"), (ap, "asterix062")]))
         .unwrap();
     let out = bin().arg("check-config").arg(&cfg_path).output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 
-    let mut daemon = daemon(&cfg_path, &w.dir.join("daemon.log"), None);
+    let mut daemon = daemon(&cfg_path, &w.dir.path().join("daemon.log"), None);
     std::thread::sleep(Duration::from_millis(400));
 
     // Faults on the TCP server: an unknown sender, garbage and a half frame
@@ -317,7 +316,7 @@ fn daemon_end_to_end_over_loopback_with_faults() {
     };
     assert!(status.success(), "{status}");
     let mut log = String::new();
-    std::fs::File::open(w.dir.join("daemon.log")).unwrap().read_to_string(&mut log).unwrap();
+    std::fs::File::open(w.dir.path().join("daemon.log")).unwrap().read_to_string(&mut log).unwrap();
 
     // The operator sees every event in the log.
     for needle in [
@@ -381,7 +380,7 @@ fn daemon_end_to_end_over_loopback_with_faults() {
         .nth(1)
         .and_then(|n| n.parse().ok())
         .expect("replay prints what it sent");
-    let recorded = std::fs::read(w.dir.join("recorded.txt")).unwrap();
+    let recorded = std::fs::read(w.dir.path().join("recorded.txt")).unwrap();
     let mut reader = CaptureReader::new(recorded.as_slice(), "recorded");
     let mut frames = 0u64;
     while let Some(r) = reader.next_record().unwrap() {
@@ -393,7 +392,7 @@ fn daemon_end_to_end_over_loopback_with_faults() {
 
     // ASTERIX against JSON: same track numbers, addresses and positions.
     let Some(py) = python() else { return };
-    let decoded = decode_asterix(&py, &ax_dg, &w.dir);
+    let decoded = decode_asterix(&py, &ax_dg, w.dir.path());
     assert!(decoded.len() > 100, "{} ASTERIX records", decoded.len());
     let by_key: HashMap<(u64, String), Vec<&Value>> =
         records.iter().filter(|r| r["type"] == "track").fold(HashMap::new(), |mut m, r| {
@@ -431,8 +430,8 @@ fn daemon_end_to_end_over_loopback_with_faults() {
 /// which the re-read must refresh).
 #[test]
 fn sighup_moves_a_udp_receiver_to_its_new_source_address() {
-    let dir = std::env::temp_dir().join(format!("fuse1090-e2e-hup-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let work = common::scratch("e2e-hup");
+    let dir = work.path();
     let port = common::free_port();
     let cfg = |source: &str| {
         format!(
@@ -497,8 +496,8 @@ fn sighup_moves_a_udp_receiver_to_its_new_source_address() {
 /// connecting again closes the older one.
 #[test]
 fn a_beast_server_survives_running_out_of_descriptors_and_keeps_one_connection_per_receiver() {
-    let dir = std::env::temp_dir().join(format!("fuse1090-e2e-fds-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let work = common::scratch("e2e-fds");
+    let dir = work.path();
     let port = common::free_port();
     let cfg_path = dir.join("fds.toml");
     let mut cfg = format!(
@@ -569,7 +568,6 @@ fn a_beast_server_survives_running_out_of_descriptors_and_keeps_one_connection_p
     let text = log();
     assert!(!text.contains("input stopped"), "{text}");
     assert!(stats_number(&log_path, "socket errors ") > 0, "socket errors not counted:\n{text}");
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// A receiver that goes silent without closing its connection (power cut,
@@ -577,8 +575,8 @@ fn a_beast_server_survives_running_out_of_descriptors_and_keeps_one_connection_p
 /// a TCP client input, connected to again.
 #[test]
 fn a_silent_receiver_is_reconnected_after_the_idle_timeout() {
-    let dir = std::env::temp_dir().join(format!("fuse1090-e2e-idle-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let work = common::scratch("e2e-idle");
+    let dir = work.path();
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let cfg_path = dir.join("idle.toml");
     std::fs::write(
@@ -612,7 +610,6 @@ fn a_silent_receiver_is_reconnected_after_the_idle_timeout() {
     assert!(daemon.wait().unwrap().success());
     let log = std::fs::read_to_string(&log_path).unwrap();
     assert!(log.contains("nothing received for 0.5 s"), "{log}");
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// The Prometheus endpoint's text (a plain HTTP/1.0 GET).
@@ -629,8 +626,8 @@ fn scrape(addr: std::net::SocketAddr) -> String {
 /// none of them; the stats line and the Prometheus endpoint say so.
 #[test]
 fn a_burst_of_frames_in_one_tcp_read_is_processed_whole() {
-    let dir = std::env::temp_dir().join(format!("fuse1090-e2e-burst-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let work = common::scratch("e2e-burst");
+    let dir = work.path();
     let listener = TcpListener::bind("127.0.0.1:0").unwrap();
     let metrics = std::net::SocketAddr::from(([127, 0, 0, 1], common::free_port()));
     let cfg_path = dir.join("burst.toml");
@@ -679,5 +676,4 @@ fn a_burst_of_frames_in_one_tcp_read_is_processed_whole() {
         "{}",
         std::fs::read_to_string(&log_path).unwrap()
     );
-    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -4,6 +4,8 @@
 //! the accuracy the scenario put in; bad scenarios and capture lines are
 //! reported with file, line and reason.
 
+mod common;
+
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -27,10 +29,8 @@ fn scenario(name: &str) -> Scenario {
     Scenario::load(&root().join(format!("fixtures/scenarios/{name}.toml"))).unwrap()
 }
 
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("fuse1090-test-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
+fn tmp(name: &str) -> tempfile::TempDir {
+    common::scratch(&format!("test-{name}"))
 }
 
 const COMMITTED: [&str; 3] = ["fusion-8seg-1hz", "fusion-8seg", "surface"];
@@ -60,12 +60,13 @@ fn simulator_is_deterministic_and_committed_captures_are_current() {
 fn run_capture_reproduces_the_committed_summaries() {
     for name in COMMITTED {
         let dir = root().join("fixtures/captures").join(name);
-        let out = tmp(name).join("out.jsonl");
+        let work = tmp(name);
+        let out = work.path().join("out.jsonl");
         let summary = run_capture(&Config::default(), &dir.join("capture.txt"), &out).unwrap();
         let expected = std::fs::read_to_string(dir.join("summary.txt")).unwrap();
         assert_eq!(summary.deterministic(), expected.trim(), "{name}");
         // Deterministic output bytes, too.
-        let again = tmp(name).join("again.jsonl");
+        let again = work.path().join("again.jsonl");
         run_capture(&Config::default(), &dir.join("capture.txt"), &again).unwrap();
         assert!(
             std::fs::read(&out).unwrap() == std::fs::read(&again).unwrap(),
@@ -76,7 +77,8 @@ fn run_capture_reproduces_the_committed_summaries() {
 
 fn adsb_row(name: &str) -> fuse1090::eval::Row {
     let dir = root().join("fixtures/captures").join(name);
-    let out = tmp(name).join("eval.jsonl");
+    let work = tmp(name);
+    let out = work.path().join("eval.jsonl");
     run_capture(&Config::default(), &dir.join("capture.txt"), &out).unwrap();
     let truth =
         Truth::read(std::io::BufReader::new(std::fs::File::open(dir.join("truth.jsonl")).unwrap())).unwrap();
@@ -111,7 +113,8 @@ fn fuse1090() -> Command {
 
 #[test]
 fn bad_scenarios_stop_with_file_line_and_reason() {
-    let dir = tmp("badscenario");
+    let work = tmp("badscenario");
+    let dir = work.path();
     let text = std::fs::read_to_string(root().join("fixtures/scenarios/fusion-8seg-1hz.toml")).unwrap();
     let bad = text.replacen("alt_m = 150.0", "alt_m = -9000.0", 1);
     let line = bad.lines().position(|l| l.contains("-9000")).unwrap() + 1;
@@ -130,7 +133,8 @@ fn bad_scenarios_stop_with_file_line_and_reason() {
 
 #[test]
 fn malformed_capture_lines_are_skipped_counted_and_reported() {
-    let dir = tmp("badcapture");
+    let work = tmp("badcapture");
+    let dir = work.path();
     let good = std::fs::read_to_string(root().join("fixtures/captures/fusion-8seg-1hz/capture.txt")).unwrap();
     let mut lines: Vec<&str> = good.lines().collect();
     lines.insert(20, "1700000010.0 rx1 <ZZZ;");
@@ -157,16 +161,21 @@ fn malformed_capture_lines_are_skipped_counted_and_reported() {
 }
 
 /// `run --capture` on a committed capture (with an optional config), then
-/// `eval --json` (with an optional scenario); returns the report.
-fn run_and_eval(name: &str, config: Option<&str>, scenario: Option<&str>) -> serde_json::Value {
+/// `eval --json` (with an optional scenario); returns the report and the
+/// scratch directory holding the tracks (`o.jsonl`).
+fn run_and_eval(
+    name: &str,
+    config: Option<&str>,
+    scenario: Option<&str>,
+) -> (serde_json::Value, tempfile::TempDir) {
     let dir = root().join("fixtures/captures").join(name);
     let work = tmp(&format!("eval-{name}"));
-    let out = work.join("o.jsonl");
+    let out = work.path().join("o.jsonl");
     let mut run = fuse1090();
     run.args(["run", "--capture"]).arg(dir.join("capture.txt")).arg("--output").arg(&out);
     if let Some(text) = config {
-        std::fs::write(work.join("c.toml"), text).unwrap();
-        run.arg("--config").arg(work.join("c.toml"));
+        std::fs::write(work.path().join("c.toml"), text).unwrap();
+        run.arg("--config").arg(work.path().join("c.toml"));
     }
     assert!(run.status().unwrap().success());
     let mut eval = fuse1090();
@@ -176,15 +185,15 @@ fn run_and_eval(name: &str, config: Option<&str>, scenario: Option<&str>) -> ser
     }
     let res = eval.output().unwrap();
     assert!(res.status.success(), "{}", String::from_utf8_lossy(&res.stderr));
-    serde_json::from_slice(&res.stdout).unwrap()
+    (serde_json::from_slice(&res.stdout).unwrap(), work)
 }
 
 #[test]
 fn eval_reports_rows_for_a_simulated_run() {
-    let v = run_and_eval("fusion-8seg", None, None);
+    let (v, work) = run_and_eval("fusion-8seg", None, None);
     assert_eq!(v["overall"][0]["source"], "adsb-report");
     let dir = root().join("fixtures/captures/fusion-8seg");
-    let out = tmp("eval-fusion-8seg").join("o.jsonl");
+    let out = work.path().join("o.jsonl");
     let table = fuse1090()
         .args(["eval", "--truth"])
         .arg(dir.join("truth.jsonl"))
@@ -200,7 +209,7 @@ fn eval_reports_rows_for_a_simulated_run() {
 fn eval_compares_mlat_fixes_with_their_cramer_rao_bound() {
     // The 1 Hz benchmark, every transmission multilaterated: GPS-timed
     // receivers, so the fixes should sit at the bound of their geometry.
-    let v = run_and_eval(
+    let (v, _work) = run_and_eval(
         "fusion-8seg-1hz",
         Some("[core.mlat]\nadsb_interval_s = 0.0\n"),
         Some("fusion-8seg-1hz"),
@@ -231,7 +240,8 @@ fn two_threads_write_the_same_bytes_as_one() {
     let mut s = scenario("fusion-8seg-1hz");
     s.aircraft[0].spoof_offset_m = Some([0.0, 300.0]);
     let (capture, _) = sim_bytes(&s);
-    let dir = tmp("two-threads");
+    let work = tmp("two-threads");
+    let dir = work.path();
     std::fs::write(dir.join("capture.txt"), &capture).unwrap();
     let cfg = Config { publish_source_tracks: true, ..Config::default() };
     run_capture(&cfg, &dir.join("capture.txt"), &dir.join("out.jsonl")).unwrap();

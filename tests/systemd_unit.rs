@@ -119,8 +119,8 @@ fn the_daemon_makes_no_call_the_units_filter_refuses() {
         return;
     }
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let dir = std::env::temp_dir().join(format!("fuse1090-unit-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let work = common::scratch("unit");
+    let dir = work.path();
     let (metrics, input) = (common::free_port(), common::free_port());
     let sink = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     let demo = std::fs::read_to_string(root.join("config/demo.toml")).unwrap();
@@ -202,7 +202,6 @@ fn the_daemon_makes_no_call_the_units_filter_refuses() {
         std::thread::sleep(Duration::from_millis(50));
     }
     let text = std::fs::read_to_string(&trace).unwrap();
-    let _ = std::fs::remove_dir_all(&dir);
     assert!(scrape.contains("fuse1090_"), "the metrics endpoint answered: {scrape:.200}");
     for call in ["sched_setscheduler(", "prctl(PR_SET_THP_DISABLE", "recvmmsg(", "sendto("] {
         assert!(text.contains(call), "the daemon never called {call}: the run did not cover it");

@@ -17,6 +17,12 @@ pub fn shared_data(rel: &str) -> Option<PathBuf> {
     }
 }
 
+/// A scratch directory for one test, removed when the returned guard drops
+/// (also when the test panics), so that repeated runs do not fill the disk.
+pub fn scratch(name: &str) -> tempfile::TempDir {
+    tempfile::Builder::new().prefix(&format!("fuse1090-{name}-")).tempdir().unwrap()
+}
+
 /// A loopback port free a moment ago (the daemons under test bind it).
 pub fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
