@@ -21,7 +21,10 @@ pub struct RunArgs {
     pub source_tracks: bool,
 }
 
-/// What an offline run did; printed as one line.
+/// What an offline run did; printed as one line on stdout, with
+/// `diagnostics` (the multilateration and tracking reports, the skipped
+/// lines) for stderr. Returned rather than printed, so that a library
+/// caller (a test, a benchmark) decides what is shown.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Summary {
     pub frames: u64,
@@ -33,6 +36,7 @@ pub struct Summary {
     pub skipped_lines: u64,
     pub span_s: f64,
     pub elapsed_s: f64,
+    pub diagnostics: Vec<String>,
 }
 
 impl Summary {
@@ -73,6 +77,9 @@ pub fn run(args: RunArgs) -> Result<()> {
     match (&args.capture, &args.output) {
         (Some(capture), Some(output)) => {
             let summary = run_capture(&cfg, capture, output)?;
+            for line in &summary.diagnostics {
+                eprintln!("{line}");
+            }
             super::print_stdout(&format!("{summary}\n"))
         }
         (Some(_), None) => bail!("--capture needs --output"),
@@ -208,13 +215,13 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
     drop(cmd_tx);
     let (back, written) = writer.join().map_err(|_| anyhow::anyhow!("tracking thread panicked"))?;
     written?;
-    eprintln!("{}", front.mlat().report(last, &|k| front.receiver_id(k).to_string()));
-    eprintln!("tracking: {:?}", back.fuser().stats());
-    for e in &errors {
-        eprintln!("fuse1090: skipped {e}");
-    }
+    let mut diagnostics = vec![
+        front.mlat().report(last, &|k| front.receiver_id(k).to_string()),
+        format!("tracking: {}", back.fuser().stats()),
+    ];
+    diagnostics.extend(errors.iter().map(|e| format!("fuse1090: skipped {e}")));
     if skipped > errors.len() as u64 {
-        eprintln!("fuse1090: ... {skipped} malformed lines skipped in all");
+        diagnostics.push(format!("fuse1090: ... {skipped} malformed lines skipped in all"));
     }
     let s = front.stats();
     Ok(Summary {
@@ -227,6 +234,7 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
         skipped_lines: skipped,
         span_s: if last >= first { last - first } else { 0.0 },
         elapsed_s: started.elapsed().as_secs_f64(),
+        diagnostics,
     })
 }
 

@@ -163,6 +163,34 @@ pub struct FuseStats {
     pub conflicts: u64,
 }
 
+/// One line for people (the offline run's report): what came in, what was
+/// turned away and why, what went out.
+impl std::fmt::Display for FuseStats {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let rejected: Vec<String> =
+            self.rejected().iter().filter(|(_, n)| *n > 0).map(|(k, n)| format!("{k}={n}")).collect();
+        write!(
+            f,
+            "{} measurements, rejected [{}], gated {}, re-run {}; tracks {} created, {} dropped, \
+             {} restarts; {} published, fusion fallbacks {}; ADS-B suspect flags {} ({} positions kept out); \
+             TDOA updates {}; conflicts {}",
+            self.measurements,
+            rejected.join(" "),
+            self.gated,
+            self.reruns,
+            self.tracks_created,
+            self.tracks_dropped,
+            self.restarts,
+            self.published,
+            self.fusion_fallbacks,
+            self.suspect_flags,
+            self.suspect_excluded,
+            self.tdoa,
+            self.conflicts
+        )
+    }
+}
+
 impl FuseStats {
     /// The measurements turned away as bad input, by reason: what the
     /// service exports and sums in its stats line.
