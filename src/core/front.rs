@@ -422,6 +422,10 @@ impl Front {
     }
 }
 
+/// The least share of a fix's timing variance counted as independent of
+/// its aircraft's ADS-B (a 100-fold inflation at most).
+const MIN_INDEPENDENT_SHARE: f64 = 0.01;
+
 impl GroupCtx<'_> {
     fn on_group(&mut self, g: &Group, now: f64, cmds: &mut Vec<Cmd>) {
         let Some(fix) = self.mlat.on_group(g, now) else {
@@ -435,13 +439,17 @@ impl GroupCtx<'_> {
         // Synchronisation errors persist from fix to fix; a filter that took
         // them as white would average them away and claim too much.
         let inflation = 1.0 + fix.sync_share * (self.sync_inflation - 1.0);
+        // What clocks synchronised on this aircraft's own ADS-B put in the
+        // fix is its ADS-B errors again: only the rest is news to a track
+        // that has its ADS-B, so only the rest is counted.
+        let own = inflation / (1.0 - fix.self_sync_share).max(MIN_INDEPENDENT_SHARE);
         let m = Measurement {
             t: fix.t,
             source: Source::Mlat,
             obs: Observation::Position {
                 lat: fix.lat,
                 lon: fix.lon,
-                cov_en: nalgebra::Matrix2::new(c[0][0], c[0][1], c[1][0], c[1][1]) * inflation,
+                cov_en: nalgebra::Matrix2::new(c[0][0], c[0][1], c[1][0], c[1][1]) * own,
                 // Heights come from altitude reports: a fix's own height is
                 // either the barometric one it was given, or (without one)
                 // so poorly determined that its linearised sigma cannot be

@@ -118,6 +118,10 @@ pub struct MlatFix {
     /// Share of the timing variance that came from clock synchronisation
     /// (0 for GPS-timed groups): errors that persist from fix to fix.
     pub sync_share: f64,
+    /// The share of the clock synchronisation behind this fix that was
+    /// learnt from this same aircraft's ADS-B positions: errors it shares
+    /// with the aircraft's ADS-B track.
+    pub self_sync_share: f64,
     pub df: u8,
 }
 
@@ -459,6 +463,7 @@ impl Mlat {
                 self.stats.sync_refused += 1;
             } else {
                 let (nis_sum, judged) = self.sync_from(&copies, p, info.adsb_sigma_m, now);
+                self.sync.note_reference(&copies, info.addr);
                 self.judge_sync_source(info.addr, nis_sum, judged);
             }
         }
@@ -483,10 +488,11 @@ impl Mlat {
         // variance) into one measurement with a smaller sigma.
         let mut ms: GroupVec<Measurement> = GroupVec::new();
         let mut sites: GroupVec<Site> = GroupVec::new();
-        let (mut sync_var, mut all_var) = (0.0, 0.0);
+        let (mut sync_var, mut self_var, mut all_var) = (0.0, 0.0, 0.0);
         for (c, t) in copies.iter().zip(&times) {
             let Some((t, var)) = t else { continue };
             sync_var += var;
+            self_var += var * self.sync.references[c.rx].share_of(info.addr);
             all_var += var + self.rxs[c.rx].sigma().powi(2);
             let rx = &self.rxs[c.rx];
             let m =
@@ -577,6 +583,7 @@ impl Mlat {
             dof: fix.dof,
             altitude_used: alt.is_some(),
             sync_share: if all_var > 0.0 { sync_var / all_var } else { 0.0 },
+            self_sync_share: if sync_var > 0.0 { self_var / sync_var } else { 0.0 },
             df: info.df,
         })
     }

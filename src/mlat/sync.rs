@@ -65,6 +65,50 @@ impl Hasher for PairHasher {
 
 type PairMap = HashMap<(usize, usize), PairFilter, BuildHasherDefault<PairHasher>>;
 
+/// The aircraft a counter-timed receiver's clock was lately synchronised on
+/// most, with their shares of its recent sync transmissions (exponential
+/// forgetting; two slots, a newcomer taking the smaller). A fix of such an
+/// aircraft inherits the errors of its own ADS-B positions through the
+/// clocks: not independent of its ADS-B, as a fix synchronised on other
+/// aircraft is.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Reference {
+    slots: [(u32, f64); 2],
+    /// Sync transmissions noted, up to the memory: a plain mean over the
+    /// first ones, so a receiver that only ever heard one aircraft knows it
+    /// from the start.
+    seen: u32,
+}
+
+/// Memory in sync transmissions: about the span a pair filter's estimate
+/// rests on.
+const REFERENCE_MEMORY: u32 = 20;
+
+impl Reference {
+    fn note(&mut self, addr: u32) {
+        self.seen = (self.seen + 1).min(REFERENCE_MEMORY);
+        let step = 1.0 / self.seen as f64;
+        let mut found = false;
+        for (a, share) in &mut self.slots {
+            if *a == addr && *share > 0.0 {
+                *share += step * (1.0 - *share);
+                found = true;
+            } else {
+                *share *= 1.0 - step;
+            }
+        }
+        if !found {
+            let k = if self.slots[0].1 <= self.slots[1].1 { 0 } else { 1 };
+            self.slots[k] = (addr, step);
+        }
+    }
+
+    /// The share of the receiver's recent sync that came from `addr`.
+    pub fn share_of(&self, addr: u32) -> f64 {
+        self.slots.iter().filter(|(a, share)| *a == addr && *share > 0.0).map(|s| s.1).sum()
+    }
+}
+
 pub struct ClockSync {
     pub params: PairParams,
     pairs: PairMap,
@@ -73,6 +117,7 @@ pub struct ClockSync {
     /// index order: what `gps_peers` answers without asking every receiver.
     gps_peers: Vec<Vec<usize>>,
     pub health: Vec<RxHealth>,
+    pub references: Vec<Reference>,
     pub stats: SyncStats,
 }
 
@@ -89,6 +134,7 @@ impl ClockSync {
             clocks: Vec::new(),
             gps_peers: Vec::new(),
             health: Vec::new(),
+            references: Vec::new(),
             stats: SyncStats::default(),
         }
     }
@@ -97,6 +143,17 @@ impl ClockSync {
         self.clocks.push(clock);
         self.gps_peers.push(Vec::new());
         self.health.push(RxHealth::default());
+        self.references.push(Reference::default());
+    }
+
+    /// Aircraft `addr`'s ADS-B position was the reference of a sync
+    /// transmission these receivers heard (GPS-timed ones need none).
+    pub fn note_reference(&mut self, copies: &[LocalCopy], addr: u32) {
+        for c in copies {
+            if self.clocks[c.rx] != ClockKind::Gps {
+                self.references[c.rx].note(addr);
+            }
+        }
     }
 
     /// The GPS-timed receivers `rx` has a pair filter with (converged or
@@ -392,6 +449,34 @@ mod tests {
         assert_eq!(s.gps_peers(2), &[] as &[usize]);
         s.reset_receiver(1);
         assert_eq!(s.gps_peers(1), &[] as &[usize]);
+    }
+
+    #[test]
+    fn a_reference_share_is_the_aircrafts_share_of_recent_sync() {
+        let mut r = Reference::default();
+        // One aircraft only: known as the whole of it from the first.
+        r.note(7);
+        assert_eq!(r.share_of(7), 1.0);
+        for _ in 0..50 {
+            r.note(7);
+        }
+        assert_eq!((r.share_of(7), r.share_of(8)), (1.0, 0.0));
+        // Then two in turn: each about half.
+        for _ in 0..100 {
+            r.note(8);
+            r.note(7);
+        }
+        assert!((r.share_of(7) - 0.5).abs() < 0.05, "{r:?}");
+        // Then another alone: the first forgotten within the memory.
+        for _ in 0..40 {
+            r.note(9);
+        }
+        assert!(r.share_of(9) > 0.8 && r.share_of(7) < 0.1, "{r:?}");
+        // Many aircraft in turn: none stands out.
+        for k in 0..200 {
+            r.note(100 + k % 10);
+        }
+        assert!((0..10).all(|k| r.share_of(100 + k) < 0.25), "{r:?}");
     }
 
     #[test]
