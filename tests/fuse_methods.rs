@@ -10,18 +10,27 @@ use fuse1090::eval::montecarlo::{monte_carlo, McRow};
 use fuse1090::fuse::Method;
 use fuse1090::sim::scenario::Scenario;
 
+/// Monte Carlo runs of a committed scenario (seeds `seeds`), under the
+/// default configuration or a committed one; the table goes to stderr.
+fn runs(scenario: &str, config: Option<&str>, methods: &[Method], seeds: std::ops::Range<u64>) -> Vec<McRow> {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let s = Scenario::load(&root.join(format!("fixtures/scenarios/{scenario}.toml"))).unwrap();
+    let cfg = match config {
+        Some(c) => Config::load(&root.join(format!("fixtures/configs/{c}.toml"))).unwrap(),
+        None => Config::default(),
+    };
+    let rows = monte_carlo(&s, &cfg.core, methods, seeds).unwrap();
+    eprintln!("{}", fuse1090::eval::montecarlo::table(&rows));
+    rows
+}
+
 fn row<'a>(rows: &'a [McRow], source: &str) -> &'a McRow {
     rows.iter().find(|r| r.source == source).unwrap_or_else(|| panic!("no {source} row"))
 }
 
 #[test]
 fn methods_on_the_8_segment_benchmark() {
-    let s = Scenario::load(
-        &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/scenarios/fusion-8seg-1hz.toml"),
-    )
-    .unwrap();
-    let rows = monte_carlo(&s, &Config::default().core, &Method::ALL, 1..13).unwrap();
-    eprintln!("{}", fuse1090::eval::montecarlo::table(&rows));
+    let rows = runs("fusion-8seg-1hz", None, &Method::ALL, 1..13);
     let (adsb, mlat, fused) = (row(&rows, "adsb"), row(&rows, "mlat"), row(&rows, "fused/measurement"));
     // The raw sources are what the paper used: 32.78 m and 12.65 m.
     assert!((row(&rows, "adsb-report").h_rmse_m - 32.78).abs() < 2.0);
@@ -42,11 +51,8 @@ fn methods_on_the_8_segment_benchmark() {
 fn methods_on_the_8_segment_flight_at_real_rates() {
     // fusion-8seg: the same flight and sites, positions and velocity at 2 Hz,
     // every transmission multilaterated. Target of the fusion issue: 5 m.
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    let s = Scenario::load(&root.join("fixtures/scenarios/fusion-8seg.toml")).unwrap();
-    let cfg = Config::load(&root.join("fixtures/configs/every-transmission.toml")).unwrap();
-    let rows = monte_carlo(&s, &cfg.core, &[Method::Measurement, Method::Reweighted], 1..13).unwrap();
-    eprintln!("{}", fuse1090::eval::montecarlo::table(&rows));
+    let rows =
+        runs("fusion-8seg", Some("every-transmission"), &[Method::Measurement, Method::Reweighted], 1..13);
     let (adsb, mlat, fused) = (row(&rows, "adsb"), row(&rows, "mlat"), row(&rows, "fused/measurement"));
     assert!(fused.h_rmse_m < 5.0, "{}", fused.h_rmse_m);
     assert!(fused.h_rmse_m < 0.5 * mlat.h_rmse_m.min(adsb.h_rmse_m), "{fused:?} {mlat:?} {adsb:?}");
@@ -109,11 +115,7 @@ fn the_1hz_benchmark_bound_for_a_filter_told_the_segment_times() {
 /// at 2.06 against 1.98-2.02 (too slow to follow an acceleration onset).
 #[test]
 fn single_source_tracks_are_consistent_at_real_rates() {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    let s = Scenario::load(&root.join("fixtures/scenarios/fusion-8seg.toml")).unwrap();
-    let cfg = Config::load(&root.join("fixtures/configs/every-transmission.toml")).unwrap();
-    let rows = monte_carlo(&s, &cfg.core, &[Method::Measurement], 1..401).unwrap();
-    eprintln!("{}", fuse1090::eval::montecarlo::table(&rows));
+    let rows = runs("fusion-8seg", Some("every-transmission"), &[Method::Measurement], 1..401);
     for source in ["adsb", "mlat"] {
         let r = row(&rows, source);
         let (nees, band) = (r.nees.unwrap(), r.nees_band.unwrap());
@@ -131,11 +133,7 @@ fn single_source_tracks_are_consistent_at_real_rates() {
 /// other aircraft.
 #[test]
 fn fixes_synchronised_on_their_own_aircraft_are_not_news_to_its_fused_track() {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    let s = Scenario::load(&root.join("fixtures/scenarios/fusion-8seg-selfsync.toml")).unwrap();
-    let cfg = Config::load(&root.join("fixtures/configs/every-transmission.toml")).unwrap();
-    let rows = monte_carlo(&s, &cfg.core, &[Method::Measurement], 1..13).unwrap();
-    eprintln!("{}", fuse1090::eval::montecarlo::table(&rows));
+    let rows = runs("fusion-8seg-selfsync", Some("every-transmission"), &[Method::Measurement], 1..13);
     let (adsb, fused) = (row(&rows, "adsb"), row(&rows, "fused/measurement"));
     assert!(fused.h_rmse_m < 1.05 * adsb.h_rmse_m, "{fused:?} {adsb:?}");
     assert!(fused.nees.unwrap() < 1.5 * adsb.nees.unwrap(), "{fused:?} {adsb:?}");

@@ -251,6 +251,8 @@ impl ClockSync {
         }
         self.stats.restarts += (before - self.pairs.len()) as u64;
         self.health[rx].clock_resets += 1;
+        // Its clock is learnt again from what comes next.
+        self.references[rx] = Reference::default();
     }
 
     fn note_health(&mut self, rx: usize, outlier: bool) {
