@@ -88,6 +88,9 @@ fn beast12_clocks_synchronise_and_fixes_reach_the_cramer_rao_bound() {
     // Accuracy once synchronised (the first 30 s are the convergence above).
     for e in &events {
         let Event::Mlat(f) = e else { continue };
+        // The one aircraft is every clock's only reference: all of every
+        // fix's synchronisation is its own.
+        assert!(f.self_sync_share > 0.99, "{}", f.self_sync_share);
         if f.t < scenario.start_unix + 30.0 {
             continue;
         }
@@ -110,6 +113,8 @@ fn beast12_clocks_synchronise_and_fixes_reach_the_cramer_rao_bound() {
         rmse / crb
     );
     assert!(n >= 300, "{n} fixes");
+    let stats = &core.mlat().stats;
+    assert_eq!(stats.self_synced_fixes, stats.fixes, "every fix counted as self-synchronised");
     assert!(rmse / crb <= 1.15, "RMSE {rmse} vs CRB {crb}");
     let band = fuse1090::eval::nees_band(n, 2.0);
     // Never over-confident; slightly conservative is tolerated (the sync
@@ -177,6 +182,9 @@ fn a_misplaced_receiver_is_excluded_and_a_restart_does_not_break_mlat() {
     );
     assert!(late_with_rx08 > 100);
     assert!(median < 60.0, "median {median}");
+    // Forty aircraft to synchronise on: hardly any fix rests on its own
+    // aircraft's ADS-B.
+    assert!(mlat.stats.self_synced_fixes * 100 < mlat.stats.fixes, "{:?}", mlat.stats);
     // The spoofers' positions disagree with the timing and stop being sync
     // sources (refused by the clock synchronisation's own check, or flagged
     // first by the conformance monitor, which keeps them out); no honest

@@ -257,6 +257,7 @@ struct FrontSnapshot {
     stats: CoreStats,
     aircraft: u64,
     mlat_fixes: u64,
+    self_synced_fixes: u64,
     dispatched: u64,
 }
 
@@ -303,6 +304,7 @@ fn core_loop(
         stats: *front.stats(),
         aircraft: front.decoder().stats().aircraft_created,
         mlat_fixes: front.mlat().stats.fixes,
+        self_synced_fixes: front.mlat().stats.self_synced_fixes,
         dispatched,
     };
     // What did not fit the last batch: a TCP read can bring thousands of
@@ -448,7 +450,7 @@ fn stats_line(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outp
     tracing::info!(
         "stats: frames {} [{}], messages {}, aircraft {}, tracks {}, fixes {} ({:.1}/s), suspects {}, conflicts {}, \
          rejected measurements {}, fusion fallbacks {}, unknown senders {}, socket errors {}, queue drops {}, \
-         output errors {}, mlat {}",
+         output errors {}, mlat {} (self-synchronised {})",
         s.frames,
         per_rx.join(" "),
         s.messages,
@@ -465,6 +467,7 @@ fn stats_line(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outp
         reg.queue_drops.load(Ordering::Relaxed),
         out_err,
         front.mlat_fixes,
+        front.self_synced_fixes,
     );
 }
 
@@ -474,6 +477,7 @@ fn metrics(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outputs
     metrics::counter!("fuse1090_frames_dispatched_total").absolute(front.dispatched);
     metrics::counter!("fuse1090_messages_total").absolute(s.messages);
     metrics::counter!("fuse1090_mlat_fixes_total").absolute(s.fixes);
+    metrics::counter!("fuse1090_mlat_self_synced_fixes_total").absolute(front.self_synced_fixes);
     metrics::gauge!("fuse1090_tracks").set(back.fuser().tracks() as f64);
     metrics::counter!("fuse1090_unknown_senders_total").absolute(reg.unknown_senders.load(Ordering::Relaxed));
     metrics::counter!("fuse1090_socket_errors_total").absolute(reg.socket_errors.load(Ordering::Relaxed));

@@ -153,6 +153,9 @@ pub struct MlatStats {
     pub sync_banned_aircraft: u64,
     pub sync_refused: u64,
     pub fixes: u64,
+    /// Fixes whose clock synchronisation came mostly (over half) from
+    /// their own aircraft's ADS-B: a network short of other references.
+    pub self_synced_fixes: u64,
     pub unverified_address: u64,
     pub rejects: HashMap<&'static str, u64>,
 }
@@ -365,7 +368,7 @@ impl Mlat {
         rejects.sort();
         format!(
             "mlat: {} fixes from {} groups; pairs {valid}/{total} valid; sync residual ns [{}]; rejects [{}]; \
-             excluded [{}]; sync messages {}, outliers {}, restarts {}",
+             excluded [{}]; sync messages {}, outliers {}, restarts {}; self-synchronised fixes {}",
             self.stats.fixes,
             self.stats.groups,
             residuals.join(" "),
@@ -373,7 +376,8 @@ impl Mlat {
             excluded.join(" "),
             self.stats.sync_messages,
             self.sync.stats.outliers,
-            self.sync.stats.restarts
+            self.sync.stats.restarts,
+            self.stats.self_synced_fixes
         )
     }
 
@@ -569,6 +573,8 @@ impl Mlat {
                 first - nearest / C_AIR
             }
         };
+        let self_sync_share = if sync_var > 0.0 { self_var / sync_var } else { 0.0 };
+        self.stats.self_synced_fixes += (self_sync_share > 0.5) as u64;
         Some(MlatFix {
             addr: info.addr,
             t,
@@ -583,7 +589,7 @@ impl Mlat {
             dof: fix.dof,
             altitude_used: alt.is_some(),
             sync_share: if all_var > 0.0 { sync_var / all_var } else { 0.0 },
-            self_sync_share: if sync_var > 0.0 { self_var / sync_var } else { 0.0 },
+            self_sync_share,
             df: info.df,
         })
     }
