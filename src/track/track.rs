@@ -1136,20 +1136,22 @@ mod tests {
             f.p[(0, 0)] = -1e4;
         }
         assert!(tr.estimate_at(9.0).is_none(), "estimated from a bad filter");
+        // Healthy and within 30 m of the truth at the estimate's time.
+        let near = |e: Estimate| {
+            let (lat, lon) = truth(e.t);
+            e.state.healthy() && crate::geo::distance_m(lat, lon, e.lat, e.lon) < 30.0
+        };
         let (lat, lon) = truth(10.0);
         assert_eq!(tr.apply(pos(10.0, lat, lon, 10.0)), Outcome::Restarted);
         assert_eq!(tr.restarts, 1);
         // Started again on that position, or nothing yet.
-        let near = |e: Estimate| e.state.healthy() && crate::geo::distance_m(lat, lon, e.lat, e.lon) < 30.0;
         assert!(tr.estimate_at(10.0).is_none_or(near));
         for k in 11..20 {
             let t = k as f64;
             let (lat, lon) = truth(t);
             tr.apply(pos(t, lat, lon, 10.0));
         }
-        let e = tr.estimate_at(19.0).unwrap();
-        let (lat, lon) = truth(19.0);
-        assert!(e.state.healthy() && crate::geo::distance_m(lat, lon, e.lat, e.lon) < 30.0);
+        assert!(near(tr.estimate_at(19.0).unwrap()));
         assert_eq!(tr.restarts, 1);
     }
 
