@@ -156,7 +156,7 @@ impl Imm {
                 }
             }
             p.ger(-1.0, &m, &m, 1.0);
-            (out.x, out.p) = model.predict(dt, &(xr + m), &p);
+            model.predict_into(dt, &(xr + m), &p, &mut out.x, &mut out.p);
         }
         // Every caller needs it (gate, NIS, linearisation): computed once.
         let combined = combine(&predicted, &c);

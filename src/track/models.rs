@@ -85,8 +85,27 @@ impl MotionModel {
     /// a fifth of the tracker's instructions).
     #[inline]
     pub fn predict(&self, t: f64, x: &Vector6<f64>, p: &Matrix6<f64>) -> (Vector6<f64>, Matrix6<f64>) {
+        let (mut px, mut pp) = (Vector6::zeros(), Matrix6::zeros());
+        self.predict_into(t, x, p, &mut px, &mut pp);
+        (px, pp)
+    }
+
+    /// [`Self::predict`] written into `(out_x, out_p)`: the IMM predicts
+    /// each model straight into its slot, where returning the pair moved
+    /// its 336 bytes twice a prediction (a tenth of the IMM's preparation).
+    /// `x` and `p` must not be the outputs.
+    pub fn predict_into(
+        &self,
+        t: f64,
+        x: &Vector6<f64>,
+        p: &Matrix6<f64>,
+        out_x: &mut Vector6<f64>,
+        out_p: &mut Matrix6<f64>,
+    ) {
         let (f, q) = self.transition_parts(t, x);
-        (f.apply(x), f.sandwich(p) + q)
+        *out_x = f.apply(x);
+        f.sandwich_into(p, out_p);
+        *out_p += q;
     }
 
     fn transition_parts(&self, t: f64, x: &Vector6<f64>) -> (Transition, Matrix6<f64>) {
@@ -229,12 +248,12 @@ impl Transition {
         }
     }
 
-    /// `F p F'`.
+    /// `F p F'` into `out` (every element written).
     #[inline]
-    fn sandwich(&self, p: &Matrix6<f64>) -> Matrix6<f64> {
-        let (mut fp, mut out) = (Matrix6::zeros(), Matrix6::zeros());
+    fn sandwich_into(&self, p: &Matrix6<f64>, out: &mut Matrix6<f64>) {
+        let mut fp = Matrix6::zeros();
         match self {
-            Transition::Dense(f) => return **f * p * f.transpose(),
+            Transition::Dense(f) => *out = **f * p * f.transpose(),
             Transition::PerAxis(f) => {
                 for axis in 0..2 {
                     let (r0, r1, r2) = (axis, 2 + axis, 4 + axis);
@@ -270,7 +289,6 @@ impl Transition {
                 }
             }
         }
-        out
     }
 }
 
