@@ -274,6 +274,9 @@ struct Aircraft {
     next_due: f64,
     /// Time of applicability waiting to be published.
     pending: Option<f64>,
+    /// The fused track's estimate at `pending`, taken when the track stood
+    /// there (see [`Fuser::apply`]).
+    pending_fused: Option<Estimate>,
     /// Measurements waiting for the MLAT hold.
     waiting: Waiting,
     nac_p: Option<u8>,
@@ -437,6 +440,7 @@ impl Fuser {
                     last_heard: now,
                     next_due: f64::NEG_INFINITY,
                     pending: None,
+                    pending_fused: None,
                     waiting: Waiting::default(),
                     nac_p: None,
                     alt_baro_ft: None,
@@ -504,8 +508,28 @@ impl Fuser {
     }
 
     /// Applies one measurement to the aircraft's tracks and marks the track
-    /// for publication when it is due.
+    /// for publication when it is due. The fused estimate to publish is
+    /// taken as the track passes the publication time: asked for later, once
+    /// newer measurements of the same release (a velocity after the last
+    /// position, say) had moved the track on, it was re-run from the track's
+    /// history, which was half of the publications and two thirds of their
+    /// cost. Measurements go in in time order from here to the publication,
+    /// so nothing older than it comes after; one of the same time takes it
+    /// again.
     fn apply(&mut self, addr: u32, m: Measurement) {
+        let t = m.t;
+        self.apply_to_tracks(addr, m);
+        if self.cfg.method != Method::Measurement {
+            return;
+        }
+        if let Some(a) = self.aircraft.get_mut(&addr) {
+            if a.pending == Some(t) {
+                a.pending_fused = a.fused.estimate_at(t);
+            }
+        }
+    }
+
+    fn apply_to_tracks(&mut self, addr: u32, m: Measurement) {
         let Some(a) = self.aircraft.get_mut(&addr) else {
             return;
         };
@@ -791,7 +815,15 @@ impl Fuser {
         // coasting limit: predicting it that far is not aligning it.
         let stale = |s: Source| confirmed(s) && age(s) > coast && age(s) <= window;
         let fused = match self.cfg.method {
-            Method::Measurement => a.fused.estimate_at(t),
+            Method::Measurement => {
+                let est = a.pending_fused.take();
+                // Asked now, the track answers the same from its history, or
+                // nothing once its history no longer reaches back to `t`
+                // (a release longer than the reorder window: the end of the
+                // input, a flood), which lost those publications.
+                debug_assert!(a.fused.estimate_at(t).is_none_or(|now| Some(now) == est), "estimate at {t}");
+                est
+            }
             method => match (adsb.filter(|_| !a.adsb_suspect), mlat) {
                 (Some(x), Some(y)) => match methods::fuse(
                     method,
@@ -1051,6 +1083,51 @@ mod tests {
         f.finish(&mut out);
         assert!(f.aircraft[&1].waiting.is_empty());
         assert_eq!(f.aircraft[&1].fused.t(), 100.999);
+    }
+
+    /// A release that moves the track on by more than its reorder window
+    /// after the publication time (a burst delivered at once: a stalled
+    /// input catching up, the end of a capture) still publishes at that
+    /// time, where the track's history no longer reaches back to it.
+    #[test]
+    fn a_release_longer_than_the_reorder_window_still_publishes() {
+        let mut f = Fuser::new(FuseConfig::default(), TrackConfig::default(), false);
+        let mut out = Vec::new();
+        let at = |t: f64| crate::geo::displace(45.0, 5.0, 3000.0, [200.0 * (t - 100.0), 0.0, 0.0]);
+        let fix = |t: f64| {
+            let (lat, lon, _) = at(t);
+            Measurement { source: Source::Mlat, ..pos(t, lat, lon) }
+        };
+        // A confirmed MLAT-fed track, each fix released after the hold.
+        for k in 0..10 {
+            let t = 100.0 + 0.5 * k as f64;
+            f.advance(t, &mut out);
+            f.on_measurement(1, None, fix(t), t, &mut out);
+        }
+        f.advance(105.0, &mut out);
+        out.clear();
+        // A fix due for publication, then five seconds of velocities, all
+        // held together and released at the end of the input.
+        let burst = 106.0;
+        f.on_measurement(1, None, fix(burst), burst, &mut out);
+        for k in 1..=10 {
+            let velocity = Measurement {
+                t: burst + 0.5 * k as f64,
+                source: Source::Adsb,
+                obs: Observation::Velocity {
+                    v_en: Vector2::new(200.0, 0.0),
+                    cov: Matrix2::identity(),
+                    climb: None,
+                },
+            };
+            f.on_measurement(1, None, velocity, burst, &mut out);
+        }
+        assert!(out.is_empty(), "held");
+        f.finish(&mut out);
+        let published: Vec<f64> =
+            out.iter().filter_map(|o| if let Output::Track(r) = o { Some(r.est.t) } else { None }).collect();
+        assert_eq!(published, [burst]);
+        assert!(f.aircraft[&1].fused.t() > burst + TrackConfig::default().reorder_window_s);
     }
 
     #[test]
