@@ -263,6 +263,13 @@ const MIN_CONFLICT_SPEED_MPS: f64 = 30.0;
 /// Speed no aircraft reaches (m/s).
 pub const MAX_SPEED_MPS: f64 = 1_200.0;
 
+/// Estimates taken at the publication time (fused; ADS-B, MLAT).
+#[derive(Default)]
+struct Taken {
+    fused: Option<Estimate>,
+    single: [Option<Estimate>; 2],
+}
+
 struct Aircraft {
     id: u64,
     fused: Track,
@@ -274,9 +281,9 @@ struct Aircraft {
     next_due: f64,
     /// Time of applicability waiting to be published.
     pending: Option<f64>,
-    /// The fused track's estimate at `pending`, taken when the track stood
-    /// there (see [`Fuser::apply`]).
-    pending_fused: Option<Estimate>,
+    /// The tracks' estimates at `pending`, taken when they stood there
+    /// (see [`Fuser::apply`]).
+    taken: Taken,
     /// Measurements waiting for the MLAT hold.
     waiting: Waiting,
     nac_p: Option<u8>,
@@ -440,7 +447,7 @@ impl Fuser {
                     last_heard: now,
                     next_due: f64::NEG_INFINITY,
                     pending: None,
-                    pending_fused: None,
+                    taken: Taken::default(),
                     waiting: Waiting::default(),
                     nac_p: None,
                     alt_baro_ft: None,
@@ -508,24 +515,30 @@ impl Fuser {
     }
 
     /// Applies one measurement to the aircraft's tracks and marks the track
-    /// for publication when it is due. The fused estimate to publish is
-    /// taken as the track passes the publication time: asked for later, once
-    /// newer measurements of the same release (a velocity after the last
-    /// position, say) had moved the track on, it was re-run from the track's
-    /// history, which was half of the publications and two thirds of their
-    /// cost. Measurements go in in time order from here to the publication,
-    /// so nothing older than it comes after; one of the same time takes it
-    /// again.
+    /// for publication when it is due. The estimates to publish are taken as
+    /// the tracks pass the publication time: asked for later, once newer
+    /// measurements of the same release (a velocity after the last position,
+    /// say) had moved a track on, each was re-run from the track's history,
+    /// which was half of the publications and two thirds of their cost, and
+    /// nothing once a release moved a track on by more than its history
+    /// reaches back (its reorder window: a stalled input catching up, the end
+    /// of a capture), which lost those publications. Measurements go in in
+    /// time order from here to the publication, so nothing older than it
+    /// comes after; one of the same time takes them again.
     fn apply(&mut self, addr: u32, m: Measurement) {
         let t = m.t;
         self.apply_to_tracks(addr, m);
-        if self.cfg.method != Method::Measurement {
+        let Some(a) = self.aircraft.get_mut(&addr) else {
+            return;
+        };
+        if a.pending != Some(t) {
             return;
         }
-        if let Some(a) = self.aircraft.get_mut(&addr) {
-            if a.pending == Some(t) {
-                a.pending_fused = a.fused.estimate_at(t);
-            }
+        if self.cfg.method == Method::Measurement {
+            a.taken.fused = a.fused.estimate_at(t);
+        }
+        if self.singles {
+            a.taken.single = [0, 1].map(|s| a.single[s].estimate_at(t));
         }
     }
 
@@ -806,8 +819,16 @@ impl Fuser {
         // A coasting single-source track (no position lately) is not fused.
         let coast = self.tcfg.coast_after_s;
         let confirmed = |s: Source| a.single[s as usize].stage == Stage::Confirmed;
+        let taken = std::mem::take(&mut a.taken);
+        // Asked now, a track answers as it did at `t` from its history, or
+        // nothing once its history no longer reaches back that far.
+        let as_taken = |track: &Track, est: Option<Estimate>| {
+            debug_assert!(track.estimate_at(t).is_none_or(|now| Some(now) == est), "estimate at {t}");
+            est
+        };
         let single = |s: Source| {
-            (age(s) <= coast && confirmed(s)).then(|| a.single[s as usize].estimate_at(t)).flatten()
+            let est = as_taken(&a.single[s as usize], taken.single[s as usize]);
+            est.filter(|_| age(s) <= coast && confirmed(s))
         };
         let (adsb, mlat) = (single(Source::Adsb), single(Source::Mlat));
         // A confirmed track whose source is still heard of (within the
@@ -815,15 +836,7 @@ impl Fuser {
         // coasting limit: predicting it that far is not aligning it.
         let stale = |s: Source| confirmed(s) && age(s) > coast && age(s) <= window;
         let fused = match self.cfg.method {
-            Method::Measurement => {
-                let est = a.pending_fused.take();
-                // Asked now, the track answers the same from its history, or
-                // nothing once its history no longer reaches back to `t`
-                // (a release longer than the reorder window: the end of the
-                // input, a flood), which lost those publications.
-                debug_assert!(a.fused.estimate_at(t).is_none_or(|now| Some(now) == est), "estimate at {t}");
-                est
-            }
+            Method::Measurement => as_taken(&a.fused, taken.fused),
             method => match (adsb.filter(|_| !a.adsb_suspect), mlat) {
                 (Some(x), Some(y)) => match methods::fuse(
                     method,
@@ -1085,49 +1098,60 @@ mod tests {
         assert_eq!(f.aircraft[&1].fused.t(), 100.999);
     }
 
-    /// A release that moves the track on by more than its reorder window
+    /// A release that moves the tracks on by more than their reorder window
     /// after the publication time (a burst delivered at once: a stalled
     /// input catching up, the end of a capture) still publishes at that
-    /// time, where the track's history no longer reaches back to it.
+    /// time, where the tracks' history no longer reaches back to it: the
+    /// fused track by measurement fusion, and the single-source tracks, by
+    /// themselves and fused track to track.
     #[test]
     fn a_release_longer_than_the_reorder_window_still_publishes() {
-        let mut f = Fuser::new(FuseConfig::default(), TrackConfig::default(), false);
-        let mut out = Vec::new();
         let at = |t: f64| crate::geo::displace(45.0, 5.0, 3000.0, [200.0 * (t - 100.0), 0.0, 0.0]);
         let fix = |t: f64| {
             let (lat, lon, _) = at(t);
             Measurement { source: Source::Mlat, ..pos(t, lat, lon) }
         };
-        // A confirmed MLAT-fed track, each fix released after the hold.
-        for k in 0..10 {
-            let t = 100.0 + 0.5 * k as f64;
-            f.advance(t, &mut out);
-            f.on_measurement(1, None, fix(t), t, &mut out);
+        for (method, source_tracks) in
+            [(Method::Measurement, false), (Method::Measurement, true), (Method::Convex, true)]
+        {
+            let cfg = FuseConfig { method, ..FuseConfig::default() };
+            let mut f = Fuser::new(cfg, TrackConfig::default(), source_tracks);
+            let mut out = Vec::new();
+            // A confirmed MLAT-fed track, each fix released after the hold.
+            for k in 0..10 {
+                let t = 100.0 + 0.5 * k as f64;
+                f.advance(t, &mut out);
+                f.on_measurement(1, None, fix(t), t, &mut out);
+            }
+            f.advance(105.0, &mut out);
+            out.clear();
+            // A fix due for publication, then five seconds of Mode S
+            // altitudes (they move the tracks on, and publish nothing), all
+            // held together and released at the end of the input.
+            let burst = 106.0;
+            f.on_measurement(1, None, fix(burst), burst, &mut out);
+            for k in 1..=10 {
+                let t = burst + 0.5 * k as f64;
+                let height = Measurement {
+                    t,
+                    source: Source::Mlat,
+                    obs: Observation::Height { h: 3000.0, var: 100.0 },
+                };
+                f.on_measurement(1, None, height, burst, &mut out);
+            }
+            assert!(out.is_empty(), "held");
+            f.finish(&mut out);
+            let published: Vec<(&str, f64)> = out
+                .iter()
+                .filter_map(|o| if let Output::Track(r) = o { Some((r.source, r.est.t)) } else { None })
+                .collect();
+            let expected =
+                if source_tracks { vec![("fused", burst), ("mlat", burst)] } else { vec![("fused", burst)] };
+            assert_eq!(published, expected, "{method:?}");
+            let reorder = TrackConfig::default().reorder_window_s;
+            assert!(f.aircraft[&1].fused.t() > burst + reorder);
+            assert!(!source_tracks || f.aircraft[&1].single[Source::Mlat as usize].t() > burst + reorder);
         }
-        f.advance(105.0, &mut out);
-        out.clear();
-        // A fix due for publication, then five seconds of velocities, all
-        // held together and released at the end of the input.
-        let burst = 106.0;
-        f.on_measurement(1, None, fix(burst), burst, &mut out);
-        for k in 1..=10 {
-            let velocity = Measurement {
-                t: burst + 0.5 * k as f64,
-                source: Source::Adsb,
-                obs: Observation::Velocity {
-                    v_en: Vector2::new(200.0, 0.0),
-                    cov: Matrix2::identity(),
-                    climb: None,
-                },
-            };
-            f.on_measurement(1, None, velocity, burst, &mut out);
-        }
-        assert!(out.is_empty(), "held");
-        f.finish(&mut out);
-        let published: Vec<f64> =
-            out.iter().filter_map(|o| if let Output::Track(r) = o { Some(r.est.t) } else { None }).collect();
-        assert_eq!(published, [burst]);
-        assert!(f.aircraft[&1].fused.t() > burst + TrackConfig::default().reorder_window_s);
     }
 
     #[test]
