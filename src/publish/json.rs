@@ -189,7 +189,7 @@ fn position_record<'a>(p: &PositionReport, receiver: &'a str) -> PositionRecord<
         alt_m: p.alt_m.map(|a| round(a, 100.0)),
         alt_baro_ft: p.alt_baro_ft,
         nac_p: p.nac_p,
-        cov_en: p.sigma_m.map(|s| [[s * s, 0.0], [0.0, s * s]]),
+        cov_en: p.sigma_m.map(|s| round(s * s, 1e3)).map(|v| [[v, 0.0], [0.0, v]]),
         surface: p.surface,
         receiver,
     }
