@@ -92,8 +92,7 @@ impl MotionModel {
 
     /// [`Self::predict`] written into `(out_x, out_p)`: the IMM predicts
     /// each model straight into its slot, where returning the pair moved
-    /// its 336 bytes twice a prediction (a tenth of the IMM's preparation).
-    /// `x` and `p` must not be the outputs.
+    /// its 336 bytes twice a prediction (6% of the IMM's preparation).
     pub fn predict_into(
         &self,
         t: f64,
