@@ -215,10 +215,9 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
     drop(cmd_tx);
     let (back, written) = writer.join().map_err(|_| anyhow::anyhow!("tracking thread panicked"))?;
     written?;
-    let mut diagnostics = vec![
-        front.mlat().report(last, &|k| front.receiver_id(k).to_string()),
-        format!("tracking: {}", back.fuser().stats()),
-    ];
+    let mut diagnostics = vec![front.mlat().report(last, &|k| front.receiver_id(k).to_string())];
+    diagnostics.extend(front.delay_report());
+    diagnostics.push(format!("tracking: {}", back.fuser().stats()));
     diagnostics.extend(errors.iter().map(|e| format!("fuse1090: skipped {e}")));
     if skipped > errors.len() as u64 {
         diagnostics.push(format!("fuse1090: ... {skipped} malformed lines skipped in all"));

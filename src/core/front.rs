@@ -12,7 +12,8 @@
 use crate::FastMap;
 
 use super::back::Cmd;
-use super::{CoreConfig, CoreStats, Event, PositionReport};
+use super::delay::DelayCal;
+use super::{CoreConfig, CoreStats, Dating, Event, PositionReport};
 use crate::feed::capture::{CaptureRecord, ClockKind, ReceiverDecl};
 use crate::feed::RawFrame;
 use crate::fuse::conformance::{ConformanceConfig, Monitor};
@@ -28,6 +29,10 @@ use crate::track::{Measurement, Observation, Source};
 struct RxState {
     decl: ReceiverDecl,
     frames: u64,
+    /// Its network delay, learnt while its reports are dated by arrival.
+    delay: DelayCal,
+    /// Its latest report was dated by arrival (no GPS time to be had).
+    arrival_dated: bool,
 }
 
 /// One aircraft's conformance monitor, forgotten when the aircraft is (as
@@ -39,6 +44,7 @@ struct Watched {
 
 /// What `on_group` needs besides the group, borrowed apart from the grouper.
 struct GroupCtx<'a> {
+    receivers: &'a mut [RxState],
     mlat: &'a mut Mlat,
     watched: &'a mut FastMap<u32, Watched>,
     stats: &'a mut CoreStats,
@@ -97,7 +103,7 @@ impl Front {
     pub fn add_receiver(&mut self, decl: ReceiverDecl, cmds: &mut Vec<Cmd>) -> usize {
         self.mlat.add_receiver(&decl);
         cmds.push(Cmd::Receiver(decl.id.clone()));
-        self.receivers.push(RxState { decl, frames: 0 });
+        self.receivers.push(RxState { decl, frames: 0, delay: DelayCal::default(), arrival_dated: false });
         self.receivers.len() - 1
     }
 
@@ -134,6 +140,7 @@ impl Front {
         (
             &mut self.grouper,
             GroupCtx {
+                receivers: &mut self.receivers,
                 mlat: &mut self.mlat,
                 watched: &mut self.watched,
                 stats: &mut self.stats,
@@ -264,19 +271,60 @@ impl Front {
 
     /// Time of applicability of a frame: exact for GPS-timed receivers, and
     /// for counter-timed ones synchronised with a GPS-timed one (within a
-    /// microsecond); the arrival time otherwise.
-    fn frame_time(&mut self, rx: usize, arrival: f64, frame: &RawFrame) -> (f64, bool) {
-        match self.receivers[rx].decl.clock {
-            ClockKind::Gps if frame.has_timing() => (ClockKind::gps_unix(frame.timestamp, arrival), true),
+    /// microsecond); otherwise the arrival time, less the receiver's network
+    /// delay once learnt ([`DelayCal`]).
+    fn frame_time(&mut self, rx: usize, arrival: f64, frame: &RawFrame) -> (f64, Dating) {
+        let exact = match self.receivers[rx].decl.clock {
+            ClockKind::Gps if frame.has_timing() => Some(ClockKind::gps_unix(frame.timestamp, arrival)),
             ClockKind::Beast12 if frame.has_timing() => {
                 match self.mlat.gps_time_of(rx, frame.timestamp, arrival) {
                     // Sane only: within a second of the arrival, converted to a microsecond.
-                    Some((t, var)) if var < 1e-12 && (arrival - t).abs() < 1.0 => (t, true),
-                    _ => (arrival, false),
+                    Some((t, var)) if var < 1e-12 && (arrival - t).abs() < 1.0 => Some(t),
+                    _ => None,
                 }
             }
-            _ => (arrival, false),
+            _ => None,
+        };
+        let r = &mut self.receivers[rx];
+        r.arrival_dated = exact.is_none();
+        match (exact, r.delay.estimate()) {
+            (Some(t), _) => (t, Dating::Gps),
+            (None, Some((mean, spread))) => (arrival - mean, Dating::Calibrated(spread)),
+            (None, None) => (arrival, Dating::Arrival),
         }
+    }
+
+    /// (id, mean, spread) of each network delay learnt (s).
+    pub fn learnt_delays(&self) -> impl Iterator<Item = (&str, f64, f64)> {
+        self.receivers.iter().filter_map(|r| r.delay.estimate().map(|(m, s)| (r.decl.id.as_str(), m, s)))
+    }
+
+    /// One line on the network delays learnt (`None` if none was): the
+    /// receivers learnt from most first, at most `SHOWN`.
+    pub fn delay_report(&self) -> Option<String> {
+        const SHOWN: usize = 6;
+        let mut learnt: Vec<&RxState> =
+            self.receivers.iter().filter(|r| r.delay.estimate().is_some()).collect();
+        learnt.sort_by_key(|r| std::cmp::Reverse(r.delay.samples()));
+        let shown: Vec<String> = learnt
+            .iter()
+            .take(SHOWN)
+            .filter_map(|r| {
+                let (mean, spread) = r.delay.estimate()?;
+                Some(format!(
+                    "{} {:.1} ms (spread {:.1} ms, {} transmissions, {} bursts left out)",
+                    r.decl.id,
+                    mean * 1e3,
+                    spread * 1e3,
+                    r.delay.samples(),
+                    r.delay.bursts
+                ))
+            })
+            .collect();
+        let more = learnt.len().saturating_sub(SHOWN);
+        let more = if more > 0 { format!("; and {more} more") } else { String::new() };
+        (!learnt.is_empty())
+            .then(|| format!("network delay learnt for reports dated by arrival: {}{more}", shown.join("; ")))
     }
 
     /// What a decoded frame tells the tracker: positions, velocities,
@@ -286,7 +334,7 @@ impl Front {
         &mut self,
         cmds: &mut Vec<Cmd>,
         arrival: f64,
-        timing: Option<(f64, bool)>,
+        timing: Option<(f64, Dating)>,
         d: &crate::modes::Decoded,
         report: Option<&PositionReport>,
     ) {
@@ -302,7 +350,12 @@ impl Front {
                 self.stats.untracked_positions += 1;
                 return;
             };
-            let time_sigma_s = if p.gps_timed { tcfg.0 } else { tcfg.1 };
+            let time_sigma_s = match p.dating {
+                Dating::Gps => tcfg.0,
+                // The spread, and never below the GPS-timed sigma.
+                Dating::Calibrated(spread) => spread.max(tcfg.0),
+                Dating::Arrival => tcfg.1,
+            };
             let m = Measurement {
                 t: p.t,
                 source: Source::Adsb,
@@ -383,7 +436,7 @@ impl Front {
     fn position_report(
         &self,
         rx: usize,
-        (t, gps_timed): (f64, bool),
+        (t, dating): (f64, Dating),
         d: &crate::modes::Decoded,
     ) -> Option<PositionReport> {
         let (Some(p), Body::Extended(es)) = (d.position.filter(|p| p.reliable), d.msg.body) else {
@@ -415,7 +468,7 @@ impl Front {
             alt_sigma_m,
             nac_p: d.nac_p,
             sigma_m: epu.map(|e| e / 2.448),
-            gps_timed,
+            dating,
             surface: p.surface,
             rx,
         })
@@ -428,6 +481,7 @@ const MIN_INDEPENDENT_SHARE: f64 = 0.01;
 
 impl GroupCtx<'_> {
     fn on_group(&mut self, g: &Group, now: f64, cmds: &mut Vec<Cmd>) {
+        self.learn_delay(g);
         let Some(fix) = self.mlat.on_group(g, now) else {
             if let Some(t) = self.mlat.take_tdoa() {
                 cmds.push(Cmd::Tdoa { g: t, now });
@@ -483,5 +537,24 @@ impl GroupCtx<'_> {
             }
         }
         cmds.push(Cmd::Measure { addr, nac_p: None, m, now });
+    }
+
+    /// A transmission whose first copy (the one decoded and reported) came
+    /// from a receiver dated by arrival, also heard by a GPS-timed one: how
+    /// late that first copy arrived. Only first copies are learnt from: the
+    /// reports are theirs, and the first of several copies is the least
+    /// delayed.
+    fn learn_delay(&mut self, g: &Group) {
+        let first = g.copies[0];
+        if !self.receivers[first.rx].arrival_dated || g.copies.len() < 2 {
+            return;
+        }
+        let exact = g.copies[1..].iter().find_map(|c| {
+            (self.receivers[c.rx].decl.clock == ClockKind::Gps && c.timestamp != 0)
+                .then(|| ClockKind::gps_unix(c.timestamp, c.arrival))
+        });
+        if let Some(t) = exact {
+            self.receivers[first.rx].delay.push(first.arrival - t);
+        }
     }
 }

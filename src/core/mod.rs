@@ -17,6 +17,7 @@
 //! same output byte for byte.
 
 pub mod back;
+pub mod delay;
 pub mod front;
 
 use serde::Deserialize;
@@ -88,6 +89,19 @@ impl CoreConfig {
     }
 }
 
+/// How a report's time of applicability was found.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Dating {
+    /// A GPS-timed receiver's timestamp, or a counter synchronised with one
+    /// (within a microsecond).
+    Gps,
+    /// The arrival at the server less the receiver's learnt network delay
+    /// ([`delay`]); the delay's spread (s).
+    Calibrated(f64),
+    /// The arrival at the server.
+    Arrival,
+}
+
 /// A decoded ADS-B position report, as broadcast (not yet tracked).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PositionReport {
@@ -106,8 +120,8 @@ pub struct PositionReport {
     pub nac_p: Option<u8>,
     /// 1-sigma horizontal error per axis (m) implied by NACp (or NUCp).
     pub sigma_m: Option<f64>,
-    /// Timed by a GPS receiver clock (else by arrival at the server).
-    pub gps_timed: bool,
+    /// How its time of applicability was found.
+    pub dating: Dating,
     pub surface: bool,
     pub rx: usize,
 }

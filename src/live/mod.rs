@@ -300,6 +300,7 @@ fn core_loop(
     let watchdog = sd_notify::watchdog_enabled();
     let mut last_ping = Instant::now();
     let mut dispatched = 0u64;
+    let (mut next_delay_metrics, mut announced) = (0.0, std::collections::HashSet::new());
     let snapshot = |front: &Front, dispatched| FrontSnapshot {
         stats: *front.stats(),
         aircraft: front.decoder().stats().aircraft_created,
@@ -361,6 +362,10 @@ fn core_loop(
         }
         let now = unix_now();
         front.advance(now, &mut cmds);
+        if now >= next_delay_metrics {
+            next_delay_metrics = now + 1.0;
+            delay_metrics(&front, &mut announced);
+        }
         // The next batch's buffer at this one's size: grown from empty, every
         // batch reallocated it several times (malloc and free were 6% of this
         // thread at 1 M frames/s), as `run --capture` found before.
@@ -383,6 +388,24 @@ fn core_loop(
     }
     if let Some(w) = recorder {
         let _ = w.into_inner().into_inner().map(|f| f.sync_all());
+    }
+}
+
+/// The network delays learnt for receivers whose reports are dated by
+/// arrival (see `core::delay`): a gauge each, and a log line when a
+/// receiver's is first learnt.
+fn delay_metrics(front: &Front, announced: &mut std::collections::HashSet<String>) {
+    for (id, mean_s, spread_s) in front.learnt_delays() {
+        metrics::gauge!("fuse1090_receiver_network_delay_seconds", "receiver" => id.to_string()).set(mean_s);
+        if !announced.contains(id) {
+            announced.insert(id.to_string());
+            tracing::info!(
+                receiver = id,
+                delay_ms = format!("{:.1}", mean_s * 1e3),
+                spread_ms = format!("{:.1}", spread_s * 1e3),
+                "reports dated by arrival: network delay learnt"
+            );
+        }
     }
 }
 
