@@ -90,7 +90,9 @@ pub struct TrackConfig {
     /// Late measurements up to this age are put in time order (s).
     pub reorder_window_s: f64,
     /// Time-of-applicability uncertainty of an ADS-B position (s, 1 sigma):
-    /// GPS-timed receivers, and receivers timed by arrival at the server.
+    /// GPS-timed receivers, and receivers timed by arrival at the server
+    /// until their network delay is learnt (`core::delay`; then its spread,
+    /// at least the first).
     pub adsb_time_sigma_gps_s: f64,
     pub adsb_time_sigma_arrival_s: f64,
     /// MLAT fixes' covariance is multiplied by up to this much, in
