@@ -531,10 +531,26 @@ impl Mlat {
                 AltitudeConstraint { h_m, sigma_m: sigma }
             })
         });
-        if ms.len() < 3 || (ms.len() < 4 && alt.is_none()) {
-            self.stats.too_few_receivers += 1;
-            // Too few for a fix, enough for a track: the synchronised times
-            // go to the tracker as time differences (two sites or more).
+        let guess = ac.last_fix.filter(|(_, t)| (now - t).abs() < 30.0).map(|(p, _)| p);
+        let too_few = ms.len() < 3 || (ms.len() < 4 && alt.is_none());
+        // Exactly as many measurements as unknowns: the equations have two
+        // solutions (hyperboloids and the altitude's shell meet twice), both
+        // fitting perfectly, and only an earlier fix tells which is the
+        // aircraft. Taken blindly, a fifth of the scale world's three-site
+        // fixes were the other one, kilometres off with a covariance of
+        // metres (NEES in the hundreds of thousands), and so were most of
+        // tma-busy's in its first seconds (only its GPS-timed receivers
+        // synchronised yet).
+        let ambiguous = !too_few && ms.len() + alt.is_some() as usize == 4 && guess.is_none();
+        if too_few || ambiguous {
+            if too_few {
+                self.stats.too_few_receivers += 1;
+            } else {
+                self.reject(Reject::Ambiguous);
+            }
+            // Too few for a fix, or too few to choose one, but enough for a
+            // track that already knows where the aircraft is: the
+            // synchronised times go to the tracker as time differences.
             if (2..=3).contains(&ms.len()) && info.addr_known {
                 let first = arrivals.iter().cloned().fold(f64::INFINITY, f64::min);
                 self.tdoa = Some(TdoaGroup {
@@ -545,7 +561,6 @@ impl Mlat {
             }
             return None;
         }
-        let guess = ac.last_fix.filter(|(_, t)| (now - t).abs() < 30.0).map(|(p, _)| p);
         let fix = match self.solve_robust(&mut ms, &mut sites, alt, guess) {
             Ok(f) => f,
             Err(why) => {
@@ -825,6 +840,29 @@ mod tests {
         assert!(with_var < without_var, "the known difference is the tighter constraint");
     }
 
+    /// Three receivers and the altitude are as many measurements as
+    /// unknowns: two solutions fit exactly. Without an earlier fix the group
+    /// gives none (its time differences go to a track, which knows where the
+    /// aircraft is); after one, it gives the solution near it, and an
+    /// address nothing verified still none.
+    #[test]
+    fn an_exactly_determined_group_needs_an_earlier_fix_to_choose_its_solution() {
+        let (mut m, rxs) = engine();
+        let target = geodetic_to_ecef(48.75, 2.40, 30_000.0 * FT_TO_M);
+        let t = 1_700_000_000.0;
+        assert!(m.on_group(&group(&rxs[..3], target, t), t + 0.2).is_none());
+        assert_eq!(m.stats.rejects.get("ambiguous"), Some(&1));
+        assert_eq!(m.take_tdoa().map(|g| g.sites.len()), Some(3));
+        m.on_group(&group(&rxs, target, t + 1.0), t + 1.2).expect("a redundant fix");
+        let f = m.on_group(&group(&rxs[..3], target, t + 2.0), t + 2.2).expect("chosen by the earlier fix");
+        assert_eq!(f.dof, 0);
+        assert!(crate::geo::distance_m(f.lat, f.lon, 48.75, 2.40) < 1.0, "{f:?}");
+        let mut g = group(&rxs[..3], target, t + 3.0);
+        g.info.addr_known = false;
+        assert!(m.on_group(&g, t + 3.2).is_none());
+        assert_eq!((m.stats.unverified_address, m.stats.fixes), (1, 2));
+    }
+
     #[test]
     fn bad_input_is_dropped_and_counted_never_a_fix() {
         let (mut m, rxs) = engine();
@@ -843,11 +881,12 @@ mod tests {
             ClockKind::gps_timestamp(ClockKind::gps_unix(g.copies[3].timestamp, t) + 3e-6);
         assert!(m.on_group(&g, t + 1.0).is_none());
         assert_eq!(m.stats.rejects.get("residual"), Some(&1));
-        // An address nothing verified, exactly determined: no fix.
+        // An address nothing verified, exactly determined: no fix (with no
+        // earlier fix to choose its solution, it is ambiguous first).
         let mut g = group(&rxs[..3], target, t + 2.0);
         g.info.addr_known = false;
         assert!(m.on_group(&g, t + 2.0).is_none());
-        assert_eq!(m.stats.unverified_address, 1);
+        assert_eq!(m.stats.rejects.get("ambiguous"), Some(&1));
         // Two copies only: too few.
         let g = group(&rxs[..2], target, t + 3.0);
         assert!(m.on_group(&g, t + 3.0).is_none());

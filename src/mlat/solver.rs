@@ -95,10 +95,13 @@ pub enum Reject {
     Range,
     Height,
     Gdop,
+    /// Exactly determined (no redundancy) with no earlier fix to choose
+    /// between its solutions.
+    Ambiguous,
 }
 
 impl Reject {
-    pub const ALL: [Reject; 7] = [
+    pub const ALL: [Reject; 8] = [
         Reject::TooFewMeasurements,
         Reject::Diverged,
         Reject::Singular,
@@ -106,6 +109,7 @@ impl Reject {
         Reject::Range,
         Reject::Height,
         Reject::Gdop,
+        Reject::Ambiguous,
     ];
     pub fn name(self) -> &'static str {
         match self {
@@ -116,6 +120,7 @@ impl Reject {
             Reject::Range => "range",
             Reject::Height => "height",
             Reject::Gdop => "gdop",
+            Reject::Ambiguous => "ambiguous",
         }
     }
 }
