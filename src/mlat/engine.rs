@@ -542,11 +542,11 @@ impl Mlat {
         // Exactly as many measurements as unknowns: the equations have two
         // solutions (hyperboloids and the altitude's shell meet twice), both
         // fitting perfectly, and only an earlier fix with redundancy tells
-        // which is the aircraft. Taken blindly, a fifth of the scale world's three-site
-        // fixes were the other one, kilometres off with a covariance of
-        // metres (NEES in the hundreds of thousands), and so were most of
-        // tma-busy's in its first seconds (only its GPS-timed receivers
-        // synchronised yet).
+        // which is the aircraft. Taken blindly, a fifth of the scale world's
+        // three-site fixes were the other one, kilometres off with a
+        // covariance of metres (NEES in the hundreds of thousands), and so
+        // were most of tma-busy's in its first seconds (only its GPS-timed
+        // receivers synchronised yet).
         let ambiguous = !too_few && ms.len() + alt.is_some() as usize == 4 && guess.is_none();
         if too_few || ambiguous {
             if too_few {

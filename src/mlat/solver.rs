@@ -95,8 +95,8 @@ pub enum Reject {
     Range,
     Height,
     Gdop,
-    /// Exactly determined (no redundancy) with no earlier fix to choose
-    /// between its solutions.
+    /// Exactly determined (no redundancy) with no earlier fix with
+    /// redundancy to choose between its two solutions.
     Ambiguous,
 }
 
