@@ -227,13 +227,19 @@ struct AcState {
     /// Latest barometric altitude (ft), when (s), and the GNSS-baro
     /// difference known then (ft).
     alt_ft: Option<(i32, f64, Option<i32>)>,
-    /// Newest fix with redundancy (ECEF, server time): the solver's start,
-    /// and what says an ADS-B aircraft's broadcasts were checked lately. One
-    /// without redundancy checks nothing, and could be the wrong of its two
-    /// solutions: taken as the next one's start, each led a chain of them down
-    /// that branch (on the scale world 3.7% of such fixes were more than
-    /// 1 km off, mean NEES 1,300; from fixes with redundancy 2.6% and 2.1).
+    /// Newest fix with redundancy (ECEF, server time): the solver's start.
+    /// One without redundancy could be the wrong of its two solutions: taken
+    /// as the next one's start, each led a chain of them down that branch
+    /// (on the scale world 3.7% of such fixes were more than 1 km off, mean
+    /// NEES 1,300; started from fixes with redundancy, 2.6% and 2.1).
     last_fix: Option<([f64; 3], f64)>,
+    /// When this aircraft's newest fix of any kind was made, or its newest
+    /// group found ambiguous (server time): an ADS-B aircraft is
+    /// multilaterated about once an `adsb_interval_s` from then. (Counted
+    /// from fixes with redundancy only, an aircraft that three sites heard
+    /// was tried at every transmission, and its time differences cost the
+    /// tracker a third more updates on the scale world.)
+    last_tried: Option<f64>,
     /// Last time an ADS-B position of this aircraft was seen.
     last_adsb: Option<f64>,
     /// Recent mean normalised innovation of the sync measurements its ADS-B
@@ -487,7 +493,7 @@ impl Mlat {
         if self.cfg.adsb_interval_s > 0.0 && ac.last_adsb.is_some_and(|t| now - t < 10.0) {
             // An ADS-B aircraft: about every `adsb_interval_s` (transponders
             // dither their squitters by +/-20%, so allow a quarter early).
-            if ac.last_fix.is_some_and(|(_, t)| now - t < 0.75 * self.cfg.adsb_interval_s) {
+            if ac.last_tried.is_some_and(|t| now - t < 0.75 * self.cfg.adsb_interval_s) {
                 self.stats.adsb_skipped += 1;
                 return None;
             }
@@ -553,6 +559,7 @@ impl Mlat {
                 self.stats.too_few_receivers += 1;
             } else {
                 self.reject(Reject::Ambiguous);
+                self.aircraft.entry(info.addr).or_default().last_tried = Some(now);
             }
             // Too few for a fix, or too few to choose one, but enough for a
             // track that already knows where the aircraft is: the
@@ -583,8 +590,10 @@ impl Mlat {
         if self.cfg.calibrate && fix.dof >= 1 {
             self.learn(&ms, alt, &fix, &sites);
         }
+        let ac = self.aircraft.entry(info.addr).or_default();
+        ac.last_tried = Some(now);
         if fix.dof >= 1 {
-            self.aircraft.entry(info.addr).or_default().last_fix = Some((fix.ecef, now));
+            ac.last_fix = Some((fix.ecef, now));
         }
         self.stats.fixes += 1;
         let root_rx = copies[root].rx;
