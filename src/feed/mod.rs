@@ -21,6 +21,12 @@ pub use hexlines::HexLineParser;
 /// results ("MLAT" in ASCII): such frames carry no receiver timing.
 pub const MLAT_MAGIC_TIMESTAMP: u64 = 0xFF00_4D4C_4154;
 
+/// A receiver timestamp usable for timing: present, and not the marker of
+/// frames a multilateration server sent back.
+pub fn has_timing(timestamp: u64) -> bool {
+    timestamp != 0 && timestamp != MLAT_MAGIC_TIMESTAMP
+}
+
 /// One frame as the receiver heard it.
 #[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Debug)]
 pub struct RawFrame {
@@ -72,7 +78,7 @@ impl RawFrame {
 
     /// Timestamp is usable for timing (present and not the MLAT marker).
     pub fn has_timing(&self) -> bool {
-        self.timestamp != 0 && self.timestamp != MLAT_MAGIC_TIMESTAMP
+        has_timing(self.timestamp)
     }
 
     /// Upper-case hex of the payload.

@@ -458,7 +458,7 @@ impl Mlat {
                 self.stats.unknown_receiver += 1;
                 continue;
             }
-            if c.timestamp == 0 || c.timestamp == crate::feed::MLAT_MAGIC_TIMESTAMP {
+            if !crate::feed::has_timing(c.timestamp) {
                 self.stats.no_timing += 1;
                 continue;
             }
