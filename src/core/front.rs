@@ -303,28 +303,29 @@ impl Front {
     /// receivers learnt from most first, at most `SHOWN`.
     pub fn delay_report(&self) -> Option<String> {
         const SHOWN: usize = 6;
-        let mut learnt: Vec<&RxState> =
-            self.receivers.iter().filter(|r| r.delay.estimate().is_some()).collect();
-        learnt.sort_by_key(|r| std::cmp::Reverse(r.delay.samples()));
+        let mut learnt: Vec<(&RxState, f64, f64)> =
+            self.receivers.iter().filter_map(|r| r.delay.estimate().map(|(m, s)| (r, m, s))).collect();
+        if learnt.is_empty() {
+            return None;
+        }
+        learnt.sort_by_key(|(r, ..)| std::cmp::Reverse(r.delay.samples()));
         let shown: Vec<String> = learnt
             .iter()
             .take(SHOWN)
-            .filter_map(|r| {
-                let (mean, spread) = r.delay.estimate()?;
-                Some(format!(
+            .map(|(r, mean, spread)| {
+                format!(
                     "{} {:.1} ms (spread {:.1} ms, {} transmissions, {} bursts left out)",
                     r.decl.id,
                     mean * 1e3,
                     spread * 1e3,
                     r.delay.samples(),
                     r.delay.bursts
-                ))
+                )
             })
             .collect();
         let more = learnt.len().saturating_sub(SHOWN);
         let more = if more > 0 { format!("; and {more} more") } else { String::new() };
-        (!learnt.is_empty())
-            .then(|| format!("network delay learnt for reports dated by arrival: {}{more}", shown.join("; ")))
+        Some(format!("network delay learnt for reports dated by arrival: {}{more}", shown.join("; ")))
     }
 
     /// What a decoded frame tells the tracker: positions, velocities,
@@ -546,11 +547,11 @@ impl GroupCtx<'_> {
     /// delayed.
     fn learn_delay(&mut self, g: &Group) {
         let first = g.copies[0];
-        if !self.receivers[first.rx].arrival_dated || g.copies.len() < 2 {
+        if !self.receivers[first.rx].arrival_dated {
             return;
         }
         let exact = g.copies[1..].iter().find_map(|c| {
-            (self.receivers[c.rx].decl.clock == ClockKind::Gps && c.timestamp != 0)
+            (self.receivers[c.rx].decl.clock == ClockKind::Gps && crate::feed::has_timing(c.timestamp))
                 .then(|| ClockKind::gps_unix(c.timestamp, c.arrival))
         });
         if let Some(t) = exact {
