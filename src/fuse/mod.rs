@@ -921,6 +921,18 @@ mod tests {
         }
     }
 
+    /// Where the test flight is at `t`: east at 200 m/s from (45, 5) at 3 km,
+    /// from t = 100 s.
+    fn at(t: f64) -> (f64, f64, f64) {
+        crate::geo::displace(45.0, 5.0, 3000.0, [200.0 * (t - 100.0), 0.0, 0.0])
+    }
+
+    /// An MLAT fix of the test flight at `t`, exact.
+    fn fix(t: f64) -> Measurement {
+        let (lat, lon, _) = at(t);
+        Measurement { source: Source::Mlat, ..pos(t, lat, lon) }
+    }
+
     #[test]
     fn impossible_measurements_are_rejected_and_counted() {
         let mut f = Fuser::new(FuseConfig::default(), TrackConfig::default(), false);
@@ -957,7 +969,7 @@ mod tests {
         // Good ones make a confirmed, published track.
         for k in 0..5 {
             let t = 100.0 + k as f64;
-            let (lat, lon, _) = crate::geo::displace(45.0, 5.0, 3000.0, [200.0 * k as f64, 0.0, 0.0]);
+            let (lat, lon, _) = at(t);
             f.on_measurement(1, Some(8), pos(t, lat, lon), t, &mut out);
         }
         assert!(out.iter().any(|o| matches!(o, Output::Track(r) if r.est.state.healthy())));
@@ -978,7 +990,6 @@ mod tests {
     /// track record with its arrival time, and the stats.
     fn flight(cfg: FuseConfig, source_tracks: bool, mlat_s: f64) -> (Vec<(f64, TrackReport)>, FuseStats) {
         let mut f = Fuser::new(cfg, TrackConfig::default(), source_tracks);
-        let at = |t: f64| crate::geo::displace(45.0, 5.0, 3000.0, [200.0 * (t - 100.0), 0.0, 0.0]);
         let mut arrivals: Vec<(f64, Measurement)> = Vec::new();
         for k in 0..120 {
             let t = 100.0 + 0.5 * k as f64;
@@ -1079,11 +1090,6 @@ mod tests {
     fn a_flood_of_one_mlat_fed_aircraft_is_applied_early_not_queued_without_bound() {
         let mut f = Fuser::new(FuseConfig::default(), TrackConfig::default(), false);
         let mut out = Vec::new();
-        let at = |t: f64| crate::geo::displace(45.0, 5.0, 3000.0, [200.0 * (t - 100.0), 0.0, 0.0]);
-        let fix = |t: f64| {
-            let (lat, lon, _) = at(t);
-            Measurement { source: Source::Mlat, ..pos(t, lat, lon) }
-        };
         f.on_measurement(1, None, fix(100.0), 100.0, &mut out);
         // 1,000 positions within a millisecond of arrival time (a replay
         // looping fast): none is lost, none waits beyond the bound.
@@ -1106,11 +1112,6 @@ mod tests {
     /// themselves and fused track to track.
     #[test]
     fn a_release_longer_than_the_reorder_window_still_publishes() {
-        let at = |t: f64| crate::geo::displace(45.0, 5.0, 3000.0, [200.0 * (t - 100.0), 0.0, 0.0]);
-        let fix = |t: f64| {
-            let (lat, lon, _) = at(t);
-            Measurement { source: Source::Mlat, ..pos(t, lat, lon) }
-        };
         for (method, source_tracks) in
             [(Method::Measurement, false), (Method::Measurement, true), (Method::Convex, true)]
         {
