@@ -111,8 +111,7 @@ impl Batch {
         for c in &cmds {
             if let Cmd::Event(ev) = c {
                 if Self::from_front(ev) {
-                    // Into memory: cannot fail.
-                    let _ = write_event(&mut text, ev, |i| front.receiver_id(i));
+                    write_event(&mut text, ev, |i| front.receiver_id(i));
                     ends.push(text.len());
                 }
             }
@@ -165,7 +164,7 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
     let (cmd_tx, cmd_rx) = std::sync::mpsc::sync_channel::<Batch>(8);
     let writer = named_thread("core-back", move || -> (Back, Result<()>) {
         let mut out = BufWriter::with_capacity(1 << 20, out_file);
-        let mut events = Vec::new();
+        let (mut events, mut line) = (Vec::new(), Vec::new());
         let write = || -> Result<()> {
             for batch in cmd_rx {
                 back.apply(batch.cmds, &mut events);
@@ -180,7 +179,9 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
                         start = end;
                         out.write_all(text)
                     } else {
-                        write_event(&mut out, &ev, |i| back.receiver_id(i))
+                        line.clear();
+                        write_event(&mut line, &ev, |i| back.receiver_id(i));
+                        out.write_all(&line)
                     };
                     written.context("writing output")?;
                 }

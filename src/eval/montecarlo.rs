@@ -78,12 +78,12 @@ pub fn run_in_memory(capture: &[u8], cfg: &CoreConfig) -> Result<Vec<u8>> {
     while let Some(rec) = reader.next_record()? {
         core.on_record(rec, &mut events);
         for ev in events.drain(..) {
-            write_event(&mut out, &ev, |i| core.receiver_id(i))?;
+            write_event(&mut out, &ev, |i| core.receiver_id(i));
         }
     }
     core.finish(&mut events);
     for ev in events.drain(..) {
-        write_event(&mut out, &ev, |i| core.receiver_id(i))?;
+        write_event(&mut out, &ev, |i| core.receiver_id(i));
     }
     Ok(out)
 }

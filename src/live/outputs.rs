@@ -86,7 +86,7 @@ impl Outputs {
                         .filter(|e| !matches!(e, Event::Position(_)))
                         .map(|e| {
                             let mut b = Vec::new();
-                            let _ = json::write_event(&mut b, e, &name);
+                            json::write_event(&mut b, e, &name);
                             b.pop(); // the newline: one object per datagram
                             b
                         })

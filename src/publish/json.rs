@@ -1,5 +1,16 @@
 //! The track stream's JSON lines (contract): one object per event, `type` and
 //! `t` always present, absent fields left out rather than null.
+//!
+//! Position, MLAT and track records are written by hand into the caller's
+//! buffer. Through serde's derive every key and string went through
+//! serde_json's escaping loop, byte by byte, and every field through its
+//! generic machinery: a tenth of all the instructions of `run --capture`,
+//! for records whose keys are our own constants. The bytes are still
+//! serde_json's: numbers are formatted by the crates it uses (zmij for
+//! floats, itoa for integers), non-finite floats are `null` as it writes
+//! them, and a string that needs escaping is handed to it. The tests compare
+//! every record with the derived serialisation this replaced. Alerts are rare
+//! and stay `serde_json::json!`.
 
 use serde::{Serialize, Serializer};
 
@@ -7,57 +18,128 @@ use crate::core::{Event, PositionReport};
 use crate::fuse::{Alert, TrackReport};
 use crate::mlat::MlatFix;
 
-#[derive(Serialize)]
-#[serde(bound = "")]
-struct MlatRecord<'r, 'a, F: Fn(usize) -> &'a str> {
-    #[serde(rename = "type")]
-    kind: &'static str,
-    hex: Hex,
-    t: f64,
-    lat: f64,
-    lon: f64,
-    alt_m: f64,
-    cov_en: [[f64; 2]; 2],
-    receivers: Names<'r, 'a, F>,
-    gdop: f64,
-    chi2: f64,
-    altitude_used: bool,
-}
+/// A JSON object being written, its `type` first. Keys are field names of
+/// this module: plain ASCII, never escaped. The methods are inlined into
+/// the record writers so that a key is copied as bytes known at compile
+/// time: as calls, each key and value was a call to `memcpy` for a few
+/// bytes (a fifth of what writing by hand saved).
+struct Obj<'o>(&'o mut Vec<u8>);
 
-/// Receivers by index, serialised as their ids without collecting them:
-/// a vector of names per MLAT record was an allocation per fix.
-struct Names<'r, 'a, F: Fn(usize) -> &'a str>(&'r [usize], &'r F);
+impl<'o> Obj<'o> {
+    fn start(out: &'o mut Vec<u8>, kind: &str) -> Obj<'o> {
+        out.extend_from_slice(b"{\"type\":");
+        string(out, kind);
+        Obj(out)
+    }
 
-impl<'a, F: Fn(usize) -> &'a str> Serialize for Names<'_, 'a, F> {
-    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        s.collect_seq(self.0.iter().map(|&r| (self.1)(r)))
+    /// `,"key":`, ready for the value.
+    #[inline(always)]
+    fn key(&mut self, key: &str) -> &mut Vec<u8> {
+        debug_assert!(key.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_'), "key {key}");
+        self.0.extend_from_slice(b",\"");
+        self.0.extend_from_slice(key.as_bytes());
+        self.0.extend_from_slice(b"\":");
+        self.0
+    }
+
+    #[inline(always)]
+    fn f64(&mut self, key: &str, v: f64) {
+        float(self.key(key), v);
+    }
+
+    #[inline(always)]
+    fn int(&mut self, key: &str, v: impl itoa::Integer) {
+        self.key(key).extend_from_slice(itoa::Buffer::new().format(v).as_bytes());
+    }
+
+    #[inline(always)]
+    fn str(&mut self, key: &str, s: &str) {
+        string(self.key(key), s);
+    }
+
+    #[inline(always)]
+    fn hex(&mut self, key: &str, h: Hex) {
+        let out = self.key(key);
+        out.push(b'"');
+        out.extend_from_slice(h.as_bytes());
+        out.push(b'"');
+    }
+
+    #[inline(always)]
+    fn bool(&mut self, key: &str, v: bool) {
+        self.key(key).extend_from_slice(if v { b"true" } else { b"false" });
+    }
+
+    #[inline(always)]
+    fn floats(&mut self, key: &str, vs: &[f64]) {
+        let out = self.key(key);
+        array(out, vs, |out, &v| float(out, v));
+    }
+
+    #[inline(always)]
+    fn cov(&mut self, key: &str, m: [[f64; 2]; 2]) {
+        let out = self.key(key);
+        array(out, &m, |out, row| array(out, row, |out, &v| float(out, v)));
+    }
+
+    #[inline(always)]
+    fn strs<'s>(&mut self, key: &str, ss: impl IntoIterator<Item = &'s str>) {
+        let out = self.key(key);
+        out.push(b'[');
+        for (i, s) in ss.into_iter().enumerate() {
+            if i > 0 {
+                out.push(b',');
+            }
+            string(out, s);
+        }
+        out.push(b']');
+    }
+
+    fn end(self) {
+        self.0.push(b'}');
     }
 }
 
-#[derive(Serialize)]
-struct PositionRecord<'a> {
-    #[serde(rename = "type")]
-    kind: &'static str,
-    source: &'static str,
-    hex: Hex,
-    t: f64,
-    lat: f64,
-    lon: f64,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    alt_m: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    alt_baro_ft: Option<i32>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    nac_p: Option<u8>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    cov_en: Option<[[f64; 2]; 2]>,
-    surface: bool,
-    receiver: &'a str,
+/// A finite number as serde_json writes it, anything else as `null`.
+#[inline(always)]
+fn float(out: &mut Vec<u8>, v: f64) {
+    if v.is_finite() {
+        out.extend_from_slice(zmij::Buffer::new().format_finite(v).as_bytes());
+    } else {
+        out.extend_from_slice(b"null");
+    }
+}
+
+#[inline(always)]
+fn array<T>(out: &mut Vec<u8>, items: &[T], mut each: impl FnMut(&mut Vec<u8>, &T)) {
+    out.push(b'[');
+    for (i, item) in items.iter().enumerate() {
+        if i > 0 {
+            out.push(b',');
+        }
+        each(out, item);
+    }
+    out.push(b']');
+}
+
+/// A quoted string. What JSON must escape (controls, quote, backslash) is
+/// rare in ours (receiver names come from the operator), so such a string
+/// goes through serde_json, which escapes as it always has.
+#[inline(always)]
+fn string(out: &mut Vec<u8>, s: &str) {
+    if s.bytes().any(|b| b < 0x20 || b == b'"' || b == b'\\') {
+        // Into memory: cannot fail.
+        let _ = serde_json::to_writer(&mut *out, s);
+    } else {
+        out.push(b'"');
+        out.extend_from_slice(s.as_bytes());
+        out.push(b'"');
+    }
 }
 
 /// A number as upper-case hex digits, at least `width` of them (what
-/// `format!("{:06X}")` writes), serialised as a string from the stack: a
-/// heap string per record and per address was a tenth of writing it.
+/// `format!("{:06X}")` writes), from the stack: a heap string per record and
+/// per address was a tenth of writing it.
 #[derive(Clone, Copy)]
 struct Hex {
     digits: [u8; 8],
@@ -77,64 +159,105 @@ impl Hex {
     fn addr(addr: u32) -> Hex {
         Hex::new(addr, 6)
     }
+
+    fn as_bytes(&self) -> &[u8] {
+        &self.digits[..self.len as usize]
+    }
 }
 
 impl Serialize for Hex {
     fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        s.serialize_str(std::str::from_utf8(&self.digits[..self.len as usize]).expect("hex digits are ASCII"))
+        s.serialize_str(std::str::from_utf8(self.as_bytes()).expect("hex digits are ASCII"))
     }
 }
 
-#[derive(Serialize)]
-pub struct TrackRecord<'a> {
-    #[serde(rename = "type")]
-    kind: &'static str,
-    id: u64,
-    hex: Hex,
-    t: f64,
-    lat: f64,
-    lon: f64,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    alt_m: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    alt_baro_ft: Option<i32>,
-    vel_enu: [f64; 3],
-    cov_en: [[f64; 2]; 2],
-    source: &'static str,
-    sources: &'a [&'static str],
-    #[serde(skip_serializing_if = "Option::is_none")]
-    nac_p: Option<u8>,
-    period_s: f64,
-    motion: &'static str,
-    adsb_suspect: bool,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    flight: Option<&'a str>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    squawk: Option<Hex>,
+/// Writes one event as a JSON line into `out`; `receiver_id` names
+/// receivers by index.
+pub fn write_event<'a>(out: &mut Vec<u8>, ev: &Event, receiver_id: impl Fn(usize) -> &'a str) {
+    match ev {
+        Event::Position(p) => position(out, p, receiver_id(p.rx)),
+        Event::Mlat(f) => mlat(out, f, receiver_id),
+        Event::Track(r) => track(out, r),
+        Event::Alert(a) => {
+            // Into memory: cannot fail.
+            let _ = serde_json::to_writer(&mut *out, &alert_record(a));
+        }
+    }
+    out.push(b'\n');
 }
 
-pub fn track_record(r: &TrackReport) -> TrackRecord<'_> {
+/// A decoded ADS-B position report, before any tracking.
+fn position(out: &mut Vec<u8>, p: &PositionReport, receiver: &str) {
+    let mut o = Obj::start(out, "position");
+    o.str("source", "adsb");
+    o.hex("hex", Hex::addr(p.addr));
+    o.f64("t", round(p.t, 1e6));
+    o.f64("lat", round(p.lat, 1e8));
+    o.f64("lon", round(p.lon, 1e8));
+    if let Some(a) = p.alt_m {
+        o.f64("alt_m", round(a, 100.0));
+    }
+    if let Some(a) = p.alt_baro_ft {
+        o.int("alt_baro_ft", a);
+    }
+    if let Some(n) = p.nac_p {
+        o.int("nac_p", n);
+    }
+    if let Some(s) = p.sigma_m {
+        let v = round(s * s, 1e3);
+        o.cov("cov_en", [[v, 0.0], [0.0, v]]);
+    }
+    o.bool("surface", p.surface);
+    o.str("receiver", receiver);
+    o.end();
+}
+
+fn mlat<'a>(out: &mut Vec<u8>, f: &MlatFix, receiver_id: impl Fn(usize) -> &'a str) {
+    let mut o = Obj::start(out, "mlat");
+    o.hex("hex", Hex::addr(f.addr));
+    o.f64("t", round(f.t, 1e9));
+    o.f64("lat", round(f.lat, 1e8));
+    o.f64("lon", round(f.lon, 1e8));
+    o.f64("alt_m", round(f.alt_m, 100.0));
+    o.cov("cov_en", f.cov_en.map(|r| r.map(|v| round(v, 1e3))));
+    o.strs("receivers", f.receivers.iter().map(|&r| receiver_id(r)));
+    o.f64("gdop", round(f.gdop, 1e3));
+    o.f64("chi2", round(f.chi2, 1e3));
+    o.bool("altitude_used", f.altitude_used);
+    o.end();
+}
+
+fn track(out: &mut Vec<u8>, r: &TrackReport) {
     let e = &r.est;
-    TrackRecord {
-        kind: "track",
-        id: r.id,
-        hex: Hex::addr(r.addr),
-        t: round(e.t, 1e6),
-        lat: round(e.lat, 1e8),
-        lon: round(e.lon, 1e8),
-        alt_m: e.alt_m.map(|a| round(a, 100.0)),
-        alt_baro_ft: r.alt_baro_ft,
-        vel_enu: e.vel_enu.map(|v| round(v, 1e3)),
-        cov_en: e.cov_en().map(|row| row.map(|v| round(v, 1e3))),
-        source: r.source,
-        sources: &r.sources,
-        nac_p: r.nac_p,
-        period_s: r.period_s,
-        motion: r.motion.name(),
-        adsb_suspect: r.adsb_suspect,
-        flight: r.flight.as_deref().filter(|f| !f.is_empty()),
-        squawk: r.squawk.map(|s| Hex::new(s.into(), 4)),
+    let mut o = Obj::start(out, "track");
+    o.int("id", r.id);
+    o.hex("hex", Hex::addr(r.addr));
+    o.f64("t", round(e.t, 1e6));
+    o.f64("lat", round(e.lat, 1e8));
+    o.f64("lon", round(e.lon, 1e8));
+    if let Some(a) = e.alt_m {
+        o.f64("alt_m", round(a, 100.0));
     }
+    if let Some(a) = r.alt_baro_ft {
+        o.int("alt_baro_ft", a);
+    }
+    o.floats("vel_enu", &e.vel_enu.map(|v| round(v, 1e3)));
+    o.cov("cov_en", e.cov_en().map(|row| row.map(|v| round(v, 1e3))));
+    o.str("source", r.source);
+    o.strs("sources", r.sources.iter().copied());
+    if let Some(n) = r.nac_p {
+        o.int("nac_p", n);
+    }
+    o.f64("period_s", r.period_s);
+    o.str("motion", r.motion.name());
+    o.bool("adsb_suspect", r.adsb_suspect);
+    if let Some(f) = r.flight.as_deref().filter(|f| !f.is_empty()) {
+        o.str("flight", f);
+    }
+    if let Some(s) = r.squawk {
+        o.hex("squawk", Hex::new(s.into(), 4));
+    }
+    o.end();
 }
 
 /// `type: "alert"` records: `kind` says which.
@@ -154,75 +277,270 @@ pub fn alert_record(a: &Alert) -> serde_json::Value {
     }
 }
 
-/// Writes one event as a JSON line; `receiver_id` names receivers by index.
-pub fn write_event<'a>(
-    out: &mut impl std::io::Write,
-    ev: &Event,
-    receiver_id: impl Fn(usize) -> &'a str,
-) -> std::io::Result<()> {
-    match ev {
-        Event::Position(p) => {
-            serde_json::to_writer(&mut *out, &position_record(p, receiver_id(p.rx)))?;
-        }
-        Event::Mlat(f) => {
-            serde_json::to_writer(&mut *out, &mlat_record(f, &receiver_id))?;
-        }
-        Event::Track(r) => {
-            serde_json::to_writer(&mut *out, &track_record(r))?;
-        }
-        Event::Alert(a) => {
-            serde_json::to_writer(&mut *out, &alert_record(a))?;
-        }
-    }
-    out.write_all(b"\n")
-}
-
-fn position_record<'a>(p: &PositionReport, receiver: &'a str) -> PositionRecord<'a> {
-    PositionRecord {
-        // A decoded ADS-B position report, before any tracking.
-        kind: "position",
-        source: "adsb",
-        hex: Hex::addr(p.addr),
-        t: round(p.t, 1e6),
-        lat: round(p.lat, 1e8),
-        lon: round(p.lon, 1e8),
-        alt_m: p.alt_m.map(|a| round(a, 100.0)),
-        alt_baro_ft: p.alt_baro_ft,
-        nac_p: p.nac_p,
-        cov_en: p.sigma_m.map(|s| round(s * s, 1e3)).map(|v| [[v, 0.0], [0.0, v]]),
-        surface: p.surface,
-        receiver,
-    }
-}
-
 fn round(v: f64, k: f64) -> f64 {
     (v * k).round() / k
 }
 
-fn mlat_record<'r, 'a, F: Fn(usize) -> &'a str>(f: &'r MlatFix, receiver_id: &'r F) -> MlatRecord<'r, 'a, F> {
-    MlatRecord {
-        kind: "mlat",
-        hex: Hex::addr(f.addr),
-        t: round(f.t, 1e9),
-        lat: round(f.lat, 1e8),
-        lon: round(f.lon, 1e8),
-        alt_m: round(f.alt_m, 100.0),
-        cov_en: f.cov_en.map(|r| r.map(|v| round(v, 1e3))),
-        receivers: Names(&f.receivers, receiver_id),
-        gdop: round(f.gdop, 1e3),
-        chi2: round(f.chi2, 1e3),
-        altitude_used: f.altitude_used,
-    }
-}
-
 #[cfg(test)]
 mod tests {
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
     use super::*;
+    use crate::core::Dating;
+    use crate::track::kf::Gaussian;
+    use crate::track::motion::Motion;
+    use crate::track::plane::Plane;
+    use crate::track::Estimate;
+
+    /// The serde derive the hand-written records replaced, kept as their
+    /// reference: same fields, same order, same rounding.
+    mod reference {
+        use serde::Serialize;
+
+        use super::super::{round, Hex};
+        use crate::core::PositionReport;
+        use crate::fuse::TrackReport;
+        use crate::mlat::MlatFix;
+
+        #[derive(Serialize)]
+        struct Mlat<'a> {
+            #[serde(rename = "type")]
+            kind: &'static str,
+            hex: Hex,
+            t: f64,
+            lat: f64,
+            lon: f64,
+            alt_m: f64,
+            cov_en: [[f64; 2]; 2],
+            receivers: Vec<&'a str>,
+            gdop: f64,
+            chi2: f64,
+            altitude_used: bool,
+        }
+
+        #[derive(Serialize)]
+        struct Position<'a> {
+            #[serde(rename = "type")]
+            kind: &'static str,
+            source: &'static str,
+            hex: Hex,
+            t: f64,
+            lat: f64,
+            lon: f64,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            alt_m: Option<f64>,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            alt_baro_ft: Option<i32>,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            nac_p: Option<u8>,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            cov_en: Option<[[f64; 2]; 2]>,
+            surface: bool,
+            receiver: &'a str,
+        }
+
+        #[derive(Serialize)]
+        struct Track<'a> {
+            #[serde(rename = "type")]
+            kind: &'static str,
+            id: u64,
+            hex: Hex,
+            t: f64,
+            lat: f64,
+            lon: f64,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            alt_m: Option<f64>,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            alt_baro_ft: Option<i32>,
+            vel_enu: [f64; 3],
+            cov_en: [[f64; 2]; 2],
+            source: &'static str,
+            sources: &'a [&'static str],
+            #[serde(skip_serializing_if = "Option::is_none")]
+            nac_p: Option<u8>,
+            period_s: f64,
+            motion: &'static str,
+            adsb_suspect: bool,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            flight: Option<&'a str>,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            squawk: Option<Hex>,
+        }
+
+        pub fn position(p: &PositionReport, receiver: &str) -> String {
+            serde_json::to_string(&Position {
+                kind: "position",
+                source: "adsb",
+                hex: Hex::addr(p.addr),
+                t: round(p.t, 1e6),
+                lat: round(p.lat, 1e8),
+                lon: round(p.lon, 1e8),
+                alt_m: p.alt_m.map(|a| round(a, 100.0)),
+                alt_baro_ft: p.alt_baro_ft,
+                nac_p: p.nac_p,
+                cov_en: p.sigma_m.map(|s| round(s * s, 1e3)).map(|v| [[v, 0.0], [0.0, v]]),
+                surface: p.surface,
+                receiver,
+            })
+            .unwrap()
+        }
+
+        pub fn mlat<'a>(f: &MlatFix, receiver_id: impl Fn(usize) -> &'a str) -> String {
+            serde_json::to_string(&Mlat {
+                kind: "mlat",
+                hex: Hex::addr(f.addr),
+                t: round(f.t, 1e9),
+                lat: round(f.lat, 1e8),
+                lon: round(f.lon, 1e8),
+                alt_m: round(f.alt_m, 100.0),
+                cov_en: f.cov_en.map(|r| r.map(|v| round(v, 1e3))),
+                receivers: f.receivers.iter().map(|&r| receiver_id(r)).collect(),
+                gdop: round(f.gdop, 1e3),
+                chi2: round(f.chi2, 1e3),
+                altitude_used: f.altitude_used,
+            })
+            .unwrap()
+        }
+
+        pub fn track(r: &TrackReport) -> String {
+            let e = &r.est;
+            serde_json::to_string(&Track {
+                kind: "track",
+                id: r.id,
+                hex: Hex::addr(r.addr),
+                t: round(e.t, 1e6),
+                lat: round(e.lat, 1e8),
+                lon: round(e.lon, 1e8),
+                alt_m: e.alt_m.map(|a| round(a, 100.0)),
+                alt_baro_ft: r.alt_baro_ft,
+                vel_enu: e.vel_enu.map(|v| round(v, 1e3)),
+                cov_en: e.cov_en().map(|row| row.map(|v| round(v, 1e3))),
+                source: r.source,
+                sources: &r.sources,
+                nac_p: r.nac_p,
+                period_s: r.period_s,
+                motion: r.motion.name(),
+                adsb_suspect: r.adsb_suspect,
+                flight: r.flight.as_deref().filter(|f| !f.is_empty()),
+                squawk: r.squawk.map(|s| Hex::new(s.into(), 4)),
+            })
+            .unwrap()
+        }
+    }
+
+    /// Numbers of every kind the records can hold: ordinary values at every
+    /// scale, both zeros, and what JSON cannot hold (written `null`).
+    fn number(rng: &mut ChaCha8Rng) -> f64 {
+        match rng.gen_range(0..12) {
+            0 => f64::NAN,
+            1 => f64::INFINITY,
+            2 => f64::NEG_INFINITY,
+            3 => -0.0,
+            4 => 0.0,
+            5 => f64::MAX,
+            6 => f64::MIN_POSITIVE,
+            7 => rng.gen_range(-1.0..1.0) * 10f64.powi(rng.gen_range(-12..20)),
+            8 => rng.gen_range(-90.0..90.0),
+            9 => 1.7e9 + rng.gen_range(0.0..1e6),
+            _ => rng.gen_range(-1e4..1e4),
+        }
+    }
+
+    /// Names as an operator might give them, including what JSON escapes.
+    fn name(rng: &mut ChaCha8Rng) -> String {
+        const PIECES: [&str; 12] =
+            ["r1", "rx-05", "", " ", "\"", "\\", "\n", "\u{1}", "\u{7f}", "é", "日本", "a\tb"];
+        (0..rng.gen_range(0..4)).map(|_| PIECES[rng.gen_range(0..PIECES.len())]).collect()
+    }
+
+    fn maybe<T>(rng: &mut ChaCha8Rng, value: impl FnOnce(&mut ChaCha8Rng) -> T) -> Option<T> {
+        rng.gen_bool(0.7).then(|| value(rng))
+    }
+
+    fn line(ev: &Event, names: &[String]) -> String {
+        let mut out = Vec::new();
+        write_event(&mut out, ev, |i| names[i].as_str());
+        String::from_utf8(out).unwrap()
+    }
+
+    #[test]
+    fn records_are_the_bytes_serde_json_wrote_for_them() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        for _ in 0..3_000 {
+            let names: Vec<String> = (0..9).map(|_| name(&mut rng)).collect();
+            let p = PositionReport {
+                addr: rng.gen::<u32>() >> rng.gen_range(0..32),
+                t: number(&mut rng),
+                lat: number(&mut rng),
+                lon: number(&mut rng),
+                alt_m: maybe(&mut rng, number),
+                alt_baro_ft: maybe(&mut rng, |r| r.gen()),
+                alt_sigma_m: None,
+                nac_p: maybe(&mut rng, |r| r.gen()),
+                sigma_m: maybe(&mut rng, number),
+                dating: Dating::Gps,
+                surface: rng.gen(),
+                rx: rng.gen_range(0..names.len()),
+            };
+            let expected = reference::position(&p, &names[p.rx]) + "\n";
+            assert_eq!(line(&Event::Position(p), &names), expected);
+
+            let f = MlatFix {
+                addr: rng.gen(),
+                t: number(&mut rng),
+                lat: number(&mut rng),
+                lon: number(&mut rng),
+                alt_m: number(&mut rng),
+                cov_en: [[number(&mut rng), number(&mut rng)], [number(&mut rng), number(&mut rng)]],
+                cov_ecef: [[0.0; 3]; 3],
+                receivers: (0..rng.gen_range(0..12)).map(|_| rng.gen_range(0..names.len())).collect(),
+                gdop: number(&mut rng),
+                chi2: number(&mut rng),
+                dof: 1,
+                altitude_used: rng.gen(),
+                sync_share: 0.0,
+                self_sync_share: 0.0,
+                df: 17,
+            };
+            let expected = reference::mlat(&f, |i| names[i].as_str()) + "\n";
+            assert_eq!(line(&Event::Mlat(Box::new(f)), &names), expected);
+
+            let plane = Plane::new(rng.gen_range(-80.0..80.0), rng.gen_range(-180.0..180.0), 0.0);
+            let est = Estimate {
+                t: number(&mut rng),
+                lat: number(&mut rng),
+                lon: number(&mut rng),
+                alt_m: maybe(&mut rng, number),
+                vel_enu: [number(&mut rng), number(&mut rng), number(&mut rng)],
+                cov_local: [[number(&mut rng), number(&mut rng)], [number(&mut rng), number(&mut rng)]],
+                plane,
+                state: Gaussian { x: Default::default(), p: Default::default() },
+            };
+            const SOURCES: [&str; 3] = ["adsb", "mlat", "fused"];
+            let r = TrackReport {
+                id: rng.gen(),
+                addr: rng.gen(),
+                source: SOURCES[rng.gen_range(0..3)],
+                est,
+                alt_baro_ft: maybe(&mut rng, |r| r.gen()),
+                sources: (0..rng.gen_range(0..3)).map(|_| SOURCES[rng.gen_range(0..3)]).collect(),
+                nac_p: maybe(&mut rng, |r| r.gen()),
+                period_s: number(&mut rng),
+                motion: [Motion::Unknown, Motion::Static, Motion::Moving][rng.gen_range(0..3)],
+                adsb_suspect: rng.gen(),
+                flight: maybe(&mut rng, |r| name(r).into()),
+                squawk: maybe(&mut rng, |r| r.gen()),
+                ages_s: [None, None],
+            };
+            let expected = reference::track(&r) + "\n";
+            assert_eq!(line(&Event::Track(Box::new(r)), &names), expected);
+        }
+    }
 
     #[test]
     fn hex_writes_what_the_standard_formatter_writes() {
-        use rand::{Rng, SeedableRng};
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
         let edges = [0, 1, 0xF, 0x10, 0xFFF, 0xFFFF, 0x1_0000, 0xFF_FFFF, 0x100_0000, u32::MAX];
         for v in edges.into_iter().chain((0..20_000).map(|_| rng.gen::<u32>() >> rng.gen_range(0..32))) {
             let json = |h: Hex| serde_json::to_string(&h).unwrap();
