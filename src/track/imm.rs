@@ -391,16 +391,14 @@ mod tests {
         let adsb = PosMeasurement { z: Vector2::new(215.0, 12.0), r: Matrix2::identity() * 900.0 }.linear();
         let fix =
             PosMeasurement { z: Vector2::new(240.0, 20.0), r: Matrix2::new(80.0, 10.0, 10.0, 60.0) }.linear();
-        let mut both = Linear::<4> {
-            h: SMatrix::<f64, 4, 6>::zeros(),
-            z: SVector::<f64, 4>::zeros(),
-            r: SMatrix::<f64, 4, 4>::zeros(),
-        };
+        let (mut h, mut z, mut r) =
+            (SMatrix::<f64, 4, 6>::zeros(), SVector::<f64, 4>::zeros(), SMatrix::<f64, 4, 4>::zeros());
         for (k, m) in [&adsb, &fix].into_iter().enumerate() {
-            both.h.fixed_view_mut::<2, 6>(2 * k, 0).copy_from(&m.h);
-            both.z.fixed_rows_mut::<2>(2 * k).copy_from(&m.z);
-            both.r.fixed_view_mut::<2, 2>(2 * k, 2 * k).copy_from(&m.r);
+            h.fixed_view_mut::<2, 6>(2 * k, 0).copy_from(&m.h);
+            z.fixed_rows_mut::<2>(2 * k).copy_from(&m.z);
+            r.fixed_view_mut::<2, 2>(2 * k, 2 * k).copy_from(&m.r);
         }
+        let both = Linear::new(h, z, r);
         let mut joint = imm.clone();
         let prep = joint.prepare(1.0);
         joint.update(&prep, &both).unwrap();

@@ -693,7 +693,8 @@ impl Track {
             return Outcome::Gated;
         };
         let h = kf::h();
-        let linear = |scale: f64| Linear { h, z, r: nominal * scale };
+        let base = Linear::new(h, z, nominal);
+        let linear = |scale: f64| base.with_r(nominal * scale);
         let nis = {
             let (nu, s) = pred.innovation(&linear(vb.scale()));
             s.try_inverse().map_or(f64::INFINITY, |si| (nu.transpose() * si * nu)[0])

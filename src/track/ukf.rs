@@ -112,7 +112,7 @@ fn regression<const M: usize, const N: usize>(
     let b = z_mean - hm * g.x;
     let r = s - hm * g.p * hm.transpose();
     let z = SVector::<f64, M>::from_fn(|i, _| m.z[i]) - b;
-    Some(Linear { h: hm, z, r: (r + r.transpose()) * 0.5 })
+    Some(Linear::new(hm, z, (r + r.transpose()) * 0.5))
 }
 
 /// The statistical linear regression of `m` at `g` (augmented with the
