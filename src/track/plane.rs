@@ -12,7 +12,7 @@
 
 use nalgebra::{Matrix2, Vector3};
 
-use crate::geo::{ecef_to_geodetic, geodetic_to_ecef, EARTH_MEAN_RADIUS_M};
+use crate::geo::{ecef_from_sin_cos, ecef_to_geodetic, geodetic_to_ecef, EARTH_MEAN_RADIUS_M};
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Plane {
@@ -27,17 +27,9 @@ pub struct Plane {
 
 impl Plane {
     pub fn new(lat: f64, lon: f64, h: f64) -> Plane {
-        let (sp, cp) = lat.to_radians().sin_cos();
-        let (sl, cl) = lon.to_radians().sin_cos();
-        Plane {
-            lat,
-            lon,
-            h,
-            origin: Vector3::from(geodetic_to_ecef(lat, lon, h)),
-            east: Vector3::new(-sl, cl, 0.0),
-            north: Vector3::new(-sp * cl, -sp * sl, cp),
-            up: Vector3::new(cp * cl, cp * sl, sp),
-        }
+        let sc = sin_cos(lat, lon);
+        let [east, north, up] = axes(sc);
+        Plane { lat, lon, h, origin: Vector3::from(ecef_from_sin_cos(sc, h)), east, north, up }
     }
 
     /// East/north (m) of a point, projected to the origin's height.
@@ -70,7 +62,11 @@ impl Plane {
     /// (`lat`, `lon`) into this plane's axes (they differ by the meridians'
     /// convergence); its transpose goes back.
     pub fn from_local(&self, lat: f64, lon: f64) -> Matrix2<f64> {
-        Plane::new(lat, lon, self.h).rotation_to(self)
+        // The axes alone: a whole plane there computed its origin too, and
+        // the sines and cosines twice (a sixth of the tracker thread's
+        // trigonometry goes to publishing alone).
+        let [east, north, _] = axes(sin_cos(lat, lon));
+        rotation(&east, &north, self)
     }
 
     /// Rotation taking horizontal vectors of `self` into `other`'s axes.
@@ -81,13 +77,27 @@ impl Plane {
     }
 
     pub fn rotation_to(&self, other: &Plane) -> Matrix2<f64> {
-        Matrix2::new(
-            other.east.dot(&self.east),
-            other.east.dot(&self.north),
-            other.north.dot(&self.east),
-            other.north.dot(&self.north),
-        )
+        rotation(&self.east, &self.north, other)
     }
+}
+
+/// `[sin lat, cos lat, sin lon, cos lon]` of a position in degrees.
+fn sin_cos(lat: f64, lon: f64) -> [f64; 4] {
+    let (sp, cp) = lat.to_radians().sin_cos();
+    let (sl, cl) = lon.to_radians().sin_cos();
+    [sp, cp, sl, cl]
+}
+
+/// The local east, north and up unit vectors (ECEF) at a position given by
+/// [`sin_cos`].
+fn axes([sp, cp, sl, cl]: [f64; 4]) -> [Vector3<f64>; 3] {
+    [Vector3::new(-sl, cl, 0.0), Vector3::new(-sp * cl, -sp * sl, cp), Vector3::new(cp * cl, cp * sl, sp)]
+}
+
+/// Rotation taking horizontal vectors given along `east` and `north` into
+/// `to`'s axes.
+fn rotation(east: &Vector3<f64>, north: &Vector3<f64>, to: &Plane) -> Matrix2<f64> {
+    Matrix2::new(to.east.dot(east), to.east.dot(north), to.north.dot(east), to.north.dot(north))
 }
 
 #[cfg(test)]
