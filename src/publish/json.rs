@@ -72,27 +72,33 @@ impl<'o> Obj<'o> {
 
     #[inline(always)]
     fn floats(&mut self, key: &str, vs: &[f64]) {
-        let out = self.key(key);
-        array(out, vs, |out, &v| float(out, v));
+        array(self.key(key), vs.iter().copied(), float);
     }
 
     #[inline(always)]
     fn cov(&mut self, key: &str, m: [[f64; 2]; 2]) {
-        let out = self.key(key);
-        array(out, &m, |out, row| array(out, row, |out, &v| float(out, v)));
+        array(self.key(key), m, |out, row| array(out, row, float));
     }
 
     #[inline(always)]
     fn strs<'s>(&mut self, key: &str, ss: impl IntoIterator<Item = &'s str>) {
-        let out = self.key(key);
-        out.push(b'[');
-        for (i, s) in ss.into_iter().enumerate() {
-            if i > 0 {
-                out.push(b',');
-            }
-            string(out, s);
+        array(self.key(key), ss, string);
+    }
+
+    /// The address, time, position and heights (when known) of a position
+    /// or track record, in their order and rounding.
+    #[inline(always)]
+    fn place(&mut self, addr: u32, t: f64, lat: f64, lon: f64, alt_m: Option<f64>, alt_baro_ft: Option<i32>) {
+        self.hex("hex", Hex::addr(addr));
+        self.f64("t", round(t, 1e6));
+        self.f64("lat", round(lat, 1e8));
+        self.f64("lon", round(lon, 1e8));
+        if let Some(a) = alt_m {
+            self.f64("alt_m", round(a, 100.0));
         }
-        out.push(b']');
+        if let Some(a) = alt_baro_ft {
+            self.int("alt_baro_ft", a);
+        }
     }
 
     fn end(self) {
@@ -111,9 +117,9 @@ fn float(out: &mut Vec<u8>, v: f64) {
 }
 
 #[inline(always)]
-fn array<T>(out: &mut Vec<u8>, items: &[T], mut each: impl FnMut(&mut Vec<u8>, &T)) {
+fn array<T>(out: &mut Vec<u8>, items: impl IntoIterator<Item = T>, mut each: impl FnMut(&mut Vec<u8>, T)) {
     out.push(b'[');
-    for (i, item) in items.iter().enumerate() {
+    for (i, item) in items.into_iter().enumerate() {
         if i > 0 {
             out.push(b',');
         }
@@ -190,16 +196,7 @@ pub fn write_event<'a>(out: &mut Vec<u8>, ev: &Event, receiver_id: impl Fn(usize
 fn position(out: &mut Vec<u8>, p: &PositionReport, receiver: &str) {
     let mut o = Obj::start(out, "position");
     o.str("source", "adsb");
-    o.hex("hex", Hex::addr(p.addr));
-    o.f64("t", round(p.t, 1e6));
-    o.f64("lat", round(p.lat, 1e8));
-    o.f64("lon", round(p.lon, 1e8));
-    if let Some(a) = p.alt_m {
-        o.f64("alt_m", round(a, 100.0));
-    }
-    if let Some(a) = p.alt_baro_ft {
-        o.int("alt_baro_ft", a);
-    }
+    o.place(p.addr, p.t, p.lat, p.lon, p.alt_m, p.alt_baro_ft);
     if let Some(n) = p.nac_p {
         o.int("nac_p", n);
     }
@@ -231,16 +228,7 @@ fn track(out: &mut Vec<u8>, r: &TrackReport) {
     let e = &r.est;
     let mut o = Obj::start(out, "track");
     o.int("id", r.id);
-    o.hex("hex", Hex::addr(r.addr));
-    o.f64("t", round(e.t, 1e6));
-    o.f64("lat", round(e.lat, 1e8));
-    o.f64("lon", round(e.lon, 1e8));
-    if let Some(a) = e.alt_m {
-        o.f64("alt_m", round(a, 100.0));
-    }
-    if let Some(a) = r.alt_baro_ft {
-        o.int("alt_baro_ft", a);
-    }
+    o.place(r.addr, e.t, e.lat, e.lon, e.alt_m, r.alt_baro_ft);
     o.floats("vel_enu", &e.vel_enu.map(|v| round(v, 1e3)));
     o.cov("cov_en", e.cov_en().map(|row| row.map(|v| round(v, 1e3))));
     o.str("source", r.source);
