@@ -62,20 +62,19 @@ impl Plane {
     /// (`lat`, `lon`) into this plane's axes (they differ by the meridians'
     /// convergence); its transpose goes back.
     pub fn from_local(&self, lat: f64, lon: f64) -> Matrix2<f64> {
-        // The axes alone: a whole plane there computed its origin too, and
-        // the sines and cosines twice (a sixth of the tracker thread's
-        // trigonometry goes to publishing alone).
+        // The axes alone (every published estimate asks this): a whole plane
+        // there computed its origin too.
         let [east, north, _] = axes(sin_cos(lat, lon));
         rotation(&east, &north, self)
     }
 
-    /// Rotation taking horizontal vectors of `self` into `other`'s axes.
     /// How much longer a length on this plane's surface is on `other`'s
     /// (the ratio of their distances from the Earth's centre).
     pub fn scale_to(&self, other: &Plane) -> f64 {
         (EARTH_MEAN_RADIUS_M + other.h) / (EARTH_MEAN_RADIUS_M + self.h)
     }
 
+    /// Rotation taking horizontal vectors of `self` into `other`'s axes.
     pub fn rotation_to(&self, other: &Plane) -> Matrix2<f64> {
         rotation(&self.east, &self.north, other)
     }
