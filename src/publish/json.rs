@@ -22,7 +22,7 @@ use crate::mlat::MlatFix;
 /// this module: plain ASCII, never escaped. The methods are inlined into
 /// the record writers so that a key is copied as bytes known at compile
 /// time: as calls, each key and value was a call to `memcpy` for a few
-/// bytes (a fifth of what writing by hand saved).
+/// bytes (a third of what writing by hand saved).
 struct Obj<'o>(&'o mut Vec<u8>);
 
 impl<'o> Obj<'o> {

@@ -22,9 +22,9 @@ pub struct Linear<const M: usize> {
     pub h: SMatrix<f64, M, 6>,
     pub z: SVector<f64, M>,
     pub r: SMatrix<f64, M, M>,
-    /// [`Linear::find_selection`] of `h`, found once: asked at every use, the
-    /// comparisons were a sixth of an IMM update (one per model, and for
-    /// the gate and the combined NIS).
+    /// [`Linear::find_selection`] of `h`, found once: asked at every use (per
+    /// model, and for the gate and the combined NIS), the comparisons were
+    /// 6% of an IMM update's instructions.
     selection: Option<usize>,
 }
 
