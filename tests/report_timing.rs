@@ -8,19 +8,33 @@
 //! bias stands out: the reports' along-track error against the truth at
 //! their stated time must be centred on zero, not on -speed x delay.
 
-use fuse1090::core::{CoreConfig, Dating, Event};
+use fuse1090::core::{CoreConfig, Dating, Event, PositionReport};
 use fuse1090::eval::Truth;
 use fuse1090::feed::capture::ClockKind;
 use fuse1090::sim::scenario::Scenario;
 
 mod common;
 
-#[test]
-fn counter_timed_reports_are_dated_in_gps_time() {
-    let mut s = Scenario::load(
+/// The 1 Hz fusion benchmark's flight, the scenario both tests change.
+fn benchmark() -> Scenario {
+    Scenario::load(
         &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/scenarios/fusion-8seg-1hz.toml"),
     )
-    .unwrap();
+    .unwrap()
+}
+
+/// A report's along-track error (m): its offset from the truth at its stated
+/// time, on the direction of motion; `None` where the truth does not reach.
+fn along_track(truth: &Truth, p: &PositionReport) -> Option<f64> {
+    let (a, b) = (truth.position("3C6DD4", p.t)?, truth.position("3C6DD4", p.t + 0.1)?);
+    let d = common::en(a.0, a.1, p.lat, p.lon);
+    let v = common::en(a.0, a.1, b.0, b.1);
+    Some((d[0] * v[0] + d[1] * v[1]) / v[0].hypot(v[1]))
+}
+
+#[test]
+fn counter_timed_reports_are_dated_in_gps_time() {
+    let mut s = benchmark();
     for r in s.receiver.iter_mut().skip(1) {
         r.clock = ClockKind::Beast12;
     }
@@ -36,14 +50,7 @@ fn counter_timed_reports_are_dated_in_gps_time() {
             continue;
         }
         gps += (p.dating == Dating::Gps) as usize;
-        let (Some(a), Some(b)) = (truth.position("3C6DD4", p.t), truth.position("3C6DD4", p.t + 0.1)) else {
-            continue;
-        };
-        // Along-track error: the offset from the truth, on the direction of motion.
-        let d = common::en(a.0, a.1, p.lat, p.lon);
-        let v = common::en(a.0, a.1, b.0, b.1);
-        let n = v[0].hypot(v[1]);
-        along.push((d[0] * v[0] + d[1] * v[1]) / n);
+        along.extend(along_track(&truth, p));
     }
     let mean = along.iter().sum::<f64>() / along.len() as f64;
     eprintln!("{} beast12 reports, {gps} dated in GPS time; mean along-track error {mean:.2} m", along.len());
@@ -63,10 +70,7 @@ fn counter_timed_reports_are_dated_in_gps_time() {
 /// (about -5 m).
 #[test]
 fn reports_dated_by_arrival_lose_the_learnt_network_delay() {
-    let mut s = Scenario::load(
-        &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/scenarios/fusion-8seg-1hz.toml"),
-    )
-    .unwrap();
+    let mut s = benchmark();
     for r in s.receiver.iter_mut() {
         r.delay_ms = 100.0;
     }
@@ -86,12 +90,7 @@ fn reports_dated_by_arrival_lose_the_learnt_network_delay() {
             continue;
         }
         calibrated += matches!(p.dating, Dating::Calibrated(spread) if spread < 0.01) as usize;
-        let (Some(a), Some(b)) = (truth.position("3C6DD4", p.t), truth.position("3C6DD4", p.t + 0.1)) else {
-            continue;
-        };
-        let d = common::en(a.0, a.1, p.lat, p.lon);
-        let v = common::en(a.0, a.1, b.0, b.1);
-        along.push((d[0] * v[0] + d[1] * v[1]) / v[0].hypot(v[1]));
+        along.extend(along_track(&truth, p));
     }
     let mean = along.iter().sum::<f64>() / along.len() as f64;
     eprintln!("{} reports of the unsynchronised receiver, {calibrated} dated by its learnt delay; mean along-track error {mean:.2} m", along.len());

@@ -296,15 +296,19 @@ impl Front {
 
     /// (id, mean, spread) of each network delay learnt (s).
     pub fn learnt_delays(&self) -> impl Iterator<Item = (&str, f64, f64)> {
-        self.receivers.iter().filter_map(|r| r.delay.estimate().map(|(m, s)| (r.decl.id.as_str(), m, s)))
+        self.learnt().map(|(r, m, s)| (r.decl.id.as_str(), m, s))
+    }
+
+    /// The receivers whose network delay is learnt, with its mean and spread (s).
+    fn learnt(&self) -> impl Iterator<Item = (&RxState, f64, f64)> {
+        self.receivers.iter().filter_map(|r| r.delay.estimate().map(|(m, s)| (r, m, s)))
     }
 
     /// One line on the network delays learnt (`None` if none was): the
     /// receivers learnt from most first, at most `SHOWN`.
     pub fn delay_report(&self) -> Option<String> {
         const SHOWN: usize = 6;
-        let mut learnt: Vec<(&RxState, f64, f64)> =
-            self.receivers.iter().filter_map(|r| r.delay.estimate().map(|(m, s)| (r, m, s))).collect();
+        let mut learnt: Vec<(&RxState, f64, f64)> = self.learnt().collect();
         if learnt.is_empty() {
             return None;
         }
