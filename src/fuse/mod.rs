@@ -295,6 +295,8 @@ struct Aircraft {
     motion_state: Motion,
     motion_t: f64,
     in_conflict: bool,
+    /// An ADS-B measurement has been taken: the tracks use `Fuser::spec`.
+    adsb_heard: bool,
     adsb_suspect: bool,
     surface: bool,
     cross: Cross,
@@ -304,6 +306,8 @@ pub struct Fuser {
     cfg: FuseConfig,
     tcfg: Arc<TrackConfig>,
     spec: Arc<ImmSpec>,
+    /// The spec of aircraft not (yet) heard in ADS-B.
+    spec_mlat_only: Arc<ImmSpec>,
     /// The static/moving test every new aircraft starts with: its threshold,
     /// a numerical chi-square inverse, is computed once.
     motion: MotionTest,
@@ -328,6 +332,7 @@ impl Fuser {
         let singles = cfg.method != Method::Measurement || publish_source_tracks;
         let spec = tcfg.imm_spec();
         Fuser {
+            spec_mlat_only: tcfg.imm_spec_mlat_only(&spec),
             cfg,
             motion: MotionTest::new(tcfg.motion_window, tcfg.motion_false_alarm),
             tcfg: Arc::new(tcfg),
@@ -433,7 +438,7 @@ impl Fuser {
                 self.stats.table_full += 1;
                 return;
             }
-            let track = Track::new(self.tcfg.clone(), self.spec.clone());
+            let track = Track::new(self.tcfg.clone(), self.spec_mlat_only.clone());
             let mut single = track.clone();
             single.keep_gain = self.cfg.method == Method::Information;
             self.stats.tracks_created += 1;
@@ -458,6 +463,7 @@ impl Fuser {
                     motion_state: Motion::Unknown,
                     motion_t: f64::NEG_INFINITY,
                     in_conflict: false,
+                    adsb_heard: false,
                     adsb_suspect: false,
                     surface: false,
                     cross: Cross::new(),
@@ -467,6 +473,12 @@ impl Fuser {
         }
         let a = self.aircraft.get_mut(&addr).expect("inserted");
         a.last_heard = now;
+        if m.source == Source::Adsb && !a.adsb_heard {
+            a.adsb_heard = true;
+            for t in std::iter::once(&mut a.fused).chain(&mut a.single) {
+                t.set_spec(self.spec.clone());
+            }
+        }
         if nac_p.is_some() && m.source == Source::Adsb {
             a.nac_p = nac_p;
         }
@@ -1018,6 +1030,87 @@ mod tests {
         f.finish(&mut out);
         collect(&mut out, f64::INFINITY);
         (published, *f.stats())
+    }
+
+    /// The fused records of an aircraft flying straight (east at 200 m/s)
+    /// for five minutes, multilaterated as by a sparse network: 150 m per
+    /// axis every 0.7 s, each fix arriving 0.5 s after its time; with one
+    /// ADS-B position first when `adsb_first`.
+    fn multilaterated(mlat_only: bool, seed: u64, adsb_first: bool) -> Vec<TrackReport> {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let mut tcfg = TrackConfig::default();
+        tcfg.mlat_only.enabled = mlat_only;
+        let mut f = Fuser::new(FuseConfig::default(), tcfg, false);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let noise = Normal::new(0.0, 150.0).expect("sigma");
+        let (mut out, mut records) = (Vec::new(), Vec::new());
+        if adsb_first {
+            let (lat, lon, _) = at(100.0);
+            f.on_measurement(1, Some(8), pos(100.0, lat, lon), 100.0, &mut out);
+        }
+        for k in 1..430 {
+            let t = 100.0 + 0.7 * k as f64;
+            let e = [noise.sample(&mut rng), noise.sample(&mut rng), 0.0];
+            let (lat, lon, h) = at(t);
+            let (lat, lon, _) = crate::geo::displace(lat, lon, h, e);
+            let m = Measurement {
+                source: Source::Mlat,
+                obs: Observation::Position {
+                    lat,
+                    lon,
+                    cov_en: Matrix2::identity() * 150.0f64.powi(2),
+                    height: Some((3000.0, 100.0)),
+                    time_sigma_s: 0.0,
+                    surface: false,
+                    claimed: true,
+                },
+                ..pos(t, lat, lon)
+            };
+            f.advance(t + 0.5, &mut out);
+            f.on_measurement(1, None, m, t + 0.5, &mut out);
+        }
+        f.finish(&mut out);
+        records.extend(out.into_iter().filter_map(|o| match o {
+            Output::Track(r) if r.source == "fused" => Some(*r),
+            _ => None,
+        }));
+        records
+    }
+
+    /// An aircraft heard only through MLAT, hundreds of metres per fix, flying
+    /// straight: with the matrix that keeps to constant velocity its track
+    /// is closer to the truth than with the matrix of ADS-B aircraft, whose
+    /// manoeuvre models then keep three quarters of the weight, and its
+    /// covariance still covers the error (straight flight is where an IMM
+    /// is most conservative: both are). An aircraft heard in ADS-B switches
+    /// like any other.
+    #[test]
+    fn an_aircraft_heard_only_by_mlat_keeps_to_constant_velocity() {
+        // (squared error, NEES) summed after the first 30 s, and their count.
+        let score = |mlat_only: bool| {
+            let (mut se, mut nees, mut n) = (0.0, 0.0, 0usize);
+            for seed in 1..=20 {
+                for r in multilaterated(mlat_only, seed, false).iter().filter(|r| r.est.t > 130.0) {
+                    let (lat, lon, _) = at(r.est.t);
+                    let plane = Plane::new(lat, lon, 3000.0);
+                    let d = Vector2::from(plane.to_en(r.est.lat, r.est.lon));
+                    let c = Matrix2::from_fn(|i, j| r.est.cov_local[i][j]);
+                    se += d.norm_squared();
+                    nees += d.dot(&(c.try_inverse().expect("covariance") * d));
+                    n += 1;
+                }
+            }
+            ((se / n as f64).sqrt(), nees / n as f64)
+        };
+        let (rmse_home, nees_home) = score(true);
+        let (rmse_sticky, nees_sticky) = score(false);
+        eprintln!("MLAT only: {rmse_home:.1} m NEES {nees_home:.2}; as ADS-B aircraft: {rmse_sticky:.1} m NEES {nees_sticky:.2}");
+        assert!(rmse_home < 0.8 * rmse_sticky, "{rmse_home} against {rmse_sticky}");
+        assert!(nees_home > 1.2 && nees_home < 2.0, "{nees_home}");
+        // Heard in ADS-B first: the same records whichever matrix MLAT-only
+        // aircraft would have.
+        assert_eq!(multilaterated(true, 1, true), multilaterated(false, 1, true));
     }
 
     /// Track-to-track fusion of a pair too far apart in time: once the MLAT

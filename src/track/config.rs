@@ -70,6 +70,34 @@ impl ModelConfig {
     }
 }
 
+/// The switching matrix of an aircraft not heard in ADS-B (Mode S only, or
+/// not yet): one that keeps to the first model (constant velocity) and
+/// returns to it (`Imm::home`). Such an aircraft is measured by MLAT fixes
+/// alone, often hundreds of metres apart at a fix or two a second, where the
+/// models' likelihoods hardly differ: its model probabilities then sit near
+/// the matrix's stationary share, which for `stay` is equal for every model,
+/// so the manoeuvre models kept three quarters of the weight in straight
+/// flight and their noise went into the estimate. ADS-B aircraft keep
+/// `stay`/`transition`: their positions and velocities tell the models
+/// apart within a second or two, and this matrix's later switching cost
+/// them more than it saved (README, Tracking).
+#[derive(Clone, Copy, Debug, Deserialize, serde::Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct MlatOnlyConfig {
+    /// Off: such aircraft switch like any other.
+    pub enabled: bool,
+    /// Probability of staying in the first model from one step to the next.
+    pub stay_first: f64,
+    /// Each other model's probability of returning to the first.
+    pub to_first: f64,
+}
+
+impl Default for MlatOnlyConfig {
+    fn default() -> Self {
+        MlatOnlyConfig { enabled: true, stay_first: 0.99, to_first: 0.1 }
+    }
+}
+
 #[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct TrackConfig {
@@ -81,6 +109,8 @@ pub struct TrackConfig {
     /// Full Markov switching matrix (rows sum to 1), optional.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub transition: Option<Vec<Vec<f64>>>,
+    /// The switching matrix of aircraft heard only through multilateration.
+    pub mlat_only: MlatOnlyConfig,
     /// Vertical channel (height, climb rate): acceleration noise density (m^2/s^3).
     pub vertical_q: f64,
     /// Output period by NACp 0..=11 (s).
@@ -136,6 +166,7 @@ impl Default for TrackConfig {
             ],
             stay: 0.9,
             transition: None,
+            mlat_only: MlatOnlyConfig::default(),
             vertical_q: 0.5,
             period_by_nacp: [1.0, 1.0, 1.0, 1.0, 1.0, 0.8, 0.6, 0.6, 0.6, 0.8, 1.0, 1.0],
             period_default_s: 1.0,
@@ -183,6 +214,14 @@ impl TrackConfig {
             }
         } else if !(self.stay > 0.0 && self.stay <= 1.0) {
             errs.push(format!("stay = {} must be in (0, 1]", self.stay));
+        }
+        let m = &self.mlat_only;
+        if m.enabled && super::Imm::home(self.models.len(), m.stay_first, m.to_first).is_none() {
+            errs.push(format!(
+                "mlat_only: stay_first = {} and to_first = {} must be probabilities that leave the \
+                 other models a chance to stay",
+                m.stay_first, m.to_first
+            ));
         }
         let pos = |v: f64| v.is_finite() && v > 0.0;
         for (name, v) in [
@@ -248,6 +287,16 @@ impl TrackConfig {
         Arc::new(ImmSpec::new(self.models.iter().map(ModelConfig::model).collect(), transition))
     }
 
+    /// The spec of aircraft heard only through MLAT (see [`MlatOnlyConfig`]):
+    /// `spec` itself when that is off.
+    pub fn imm_spec_mlat_only(&self, spec: &Arc<ImmSpec>) -> Arc<ImmSpec> {
+        let m = &self.mlat_only;
+        match super::Imm::home(self.models.len(), m.stay_first, m.to_first) {
+            Some(t) if m.enabled => Arc::new(ImmSpec::new(spec.models.clone(), t)),
+            _ => spec.clone(),
+        }
+    }
+
     /// The output period for a NACp (s).
     pub fn period_s(&self, nac_p: Option<u8>) -> f64 {
         match nac_p {
@@ -281,5 +330,21 @@ mod tests {
         let errs = bad.validate().unwrap_err();
         assert!(errs.contains("models[0]: accel = 30 must be within +-20"), "{errs}");
         assert!(errs.contains("models[1]: q = 0 must be positive"), "{errs}");
+    }
+
+    #[test]
+    fn the_mlat_only_matrix_is_checked_and_can_be_turned_off() {
+        let text = "[core.track]\nmlat_only = { stay_first = 0.5, to_first = 0.9 }\n";
+        let err = crate::config::Config::parse(text, "t.toml").unwrap_err().to_string();
+        assert!(err.contains("mlat_only: stay_first = 0.5 and to_first = 0.9"), "{err}");
+        let off = TrackConfig {
+            mlat_only: MlatOnlyConfig { enabled: false, ..Default::default() },
+            ..Default::default()
+        };
+        let spec = off.imm_spec();
+        assert!(Arc::ptr_eq(&off.imm_spec_mlat_only(&spec), &spec));
+        let on = TrackConfig::default();
+        let spec = on.imm_spec();
+        assert_eq!(on.imm_spec_mlat_only(&spec).transition, super::super::Imm::home(4, 0.99, 0.1).unwrap());
     }
 }

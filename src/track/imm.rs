@@ -84,6 +84,34 @@ impl Imm {
         DMatrix::from_fn(n, n, |r, c| if r == c { stay } else { (1.0 - stay) / (n - 1) as f64 })
     }
 
+    /// A matrix with a home model, the first: it stays there with
+    /// probability `stay_first`, and every other model returns to it with
+    /// probability `to_first`. Every other move (from the first to another,
+    /// between two others) has the first's leaving share, (1 - stay_first) /
+    /// (n - 1), so each column has one value off its diagonal and
+    /// `prepare` keeps its shared sum. Over time the first model's share
+    /// tends to to_first / (to_first + 1 - stay_first). `None` when the
+    /// values are not probabilities or leave another model no chance to stay.
+    pub fn home(n: usize, stay_first: f64, to_first: f64) -> Option<DMatrix<f64>> {
+        let probability = |p: f64| (0.0..=1.0).contains(&p);
+        if !(probability(stay_first) && probability(to_first)) {
+            return None;
+        }
+        if n == 1 {
+            return Some(DMatrix::from_element(1, 1, 1.0));
+        }
+        let leave = (1.0 - stay_first) / (n - 1) as f64;
+        let stay = 1.0 - to_first - (n - 2) as f64 * leave;
+        (stay >= 0.0).then(|| {
+            DMatrix::from_fn(n, n, |r, c| match (r, c) {
+                (0, 0) => stay_first,
+                (_, 0) => to_first,
+                _ if r == c => stay,
+                _ => leave,
+            })
+        })
+    }
+
     pub fn estimate(&self) -> Gaussian {
         combine(&self.filters, &self.mu)
     }
@@ -295,6 +323,31 @@ pub fn combine(parts: &[Gaussian], w: &[f64]) -> Gaussian {
 mod tests {
     use super::*;
     use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
+
+    #[test]
+    fn a_home_matrix_keeps_its_shared_sum_and_its_stationary_share() {
+        let t = Imm::home(4, 0.99, 0.1).expect("valid");
+        for r in 0..4 {
+            assert!((t.row(r).sum() - 1.0).abs() < 1e-12, "row {r}");
+        }
+        let models = vec![MotionModel::ConstantVelocity { q: 0.05 }; 4];
+        assert!(
+            ImmSpec::new(models, t.clone()).uniform_off.is_some(),
+            "one value off each column's diagonal"
+        );
+        // The chain's long-run share of the first model, by iterating it.
+        let mut mu = nalgebra::RowDVector::from_element(4, 0.25);
+        for _ in 0..10_000 {
+            mu = &mu * &t;
+        }
+        assert!((mu[0] - 0.1 / (0.1 + 0.01)).abs() < 1e-9, "{mu}");
+        assert_eq!(Imm::home(1, 0.99, 0.1), Some(DMatrix::from_element(1, 1, 1.0)));
+        assert_eq!(Imm::home(2, 0.99, 0.1).map(|t| t[(1, 1)]), Some(0.9));
+        // Returning more often than the other models could stay; not probabilities.
+        assert_eq!(Imm::home(4, 0.0, 0.5), None);
+        assert_eq!(Imm::home(4, 1.2, 0.1), None);
+        assert_eq!(Imm::home(4, 0.99, f64::NAN), None);
+    }
 
     /// Straight flight and turns either way at about 3 deg/s.
     fn straight_and_turns() -> Vec<MotionModel> {

@@ -385,6 +385,21 @@ impl Track {
         }
     }
 
+    /// Changes the models' switching matrix (the same models) from now on.
+    pub fn set_spec(&mut self, spec: Arc<ImmSpec>) {
+        self.spec = spec;
+        self.sync_spec();
+    }
+
+    /// A state restored from the history may predate `set_spec`.
+    fn sync_spec(&mut self) {
+        if let Some(imm) = &mut self.state.imm {
+            if !Arc::ptr_eq(&imm.spec, &self.spec) {
+                imm.spec = self.spec.clone();
+            }
+        }
+    }
+
     /// Time of the newest applied measurement.
     pub fn t(&self) -> f64 {
         self.state.t
@@ -421,6 +436,7 @@ impl Track {
             let (first, before) = tail.next().expect("a newer measurement exists");
             let rest: Vec<Measurement> = std::iter::once(first).chain(tail.map(|(h, _)| h)).collect();
             self.state = *before.expect("found with a copy");
+            self.sync_spec();
             let (older, newer) = rest.split_at(i - j);
             for h in older {
                 self.apply_and_store(*h);
@@ -488,6 +504,7 @@ impl Track {
             keep_gain: false,
             gain: None,
         };
+        scratch.sync_spec();
         for (h, _) in self.history.range(j..i) {
             scratch.apply_one(h);
         }
