@@ -694,6 +694,8 @@ impl Fuser {
             return;
         };
         a.adsb_suspect = suspect;
+        // Its ADS-B kept out, the fused track is fed by MLAT alone.
+        a.fused.set_spec(if suspect { &self.spec_mlat_only } else { &self.spec }.clone());
         self.stats.suspect_flags += suspect as u64;
         if suspect {
             tracing::warn!(hex = format!("{addr:06X}"), offset_m, "ADS-B position contradicted by timing");
@@ -1035,8 +1037,9 @@ mod tests {
     /// The fused records of an aircraft flying straight (east at 200 m/s)
     /// for five minutes, multilaterated as by a sparse network: 150 m per
     /// axis every 0.7 s, each fix arriving 0.5 s after its time; with one
-    /// ADS-B position first when `adsb_first`.
-    fn multilaterated(mlat_only: bool, seed: u64, adsb_first: bool) -> Vec<TrackReport> {
+    /// ADS-B position first when `adsb_first`, its ADS-B then flagged as
+    /// suspect when `suspect`.
+    fn multilaterated(mlat_only: bool, seed: u64, adsb_first: bool, suspect: bool) -> Vec<TrackReport> {
         use rand::SeedableRng;
         use rand_distr::{Distribution, Normal};
         let mut tcfg = TrackConfig::default();
@@ -1048,6 +1051,9 @@ mod tests {
         if adsb_first {
             let (lat, lon, _) = at(100.0);
             f.on_measurement(1, Some(8), pos(100.0, lat, lon), 100.0, &mut out);
+            if suspect {
+                f.set_suspect(1, 100.0, true, 2000.0, 100.0, &mut out);
+            }
         }
         for k in 1..430 {
             let t = 100.0 + 0.7 * k as f64;
@@ -1083,15 +1089,16 @@ mod tests {
     /// is closer to the truth than with the matrix of ADS-B aircraft, whose
     /// manoeuvre models then keep three quarters of the weight, and its
     /// covariance still covers the error (straight flight is where an IMM
-    /// is most conservative: both are). An aircraft heard in ADS-B switches
-    /// like any other.
+    /// is most conservative: both are). So does one whose ADS-B is kept out
+    /// as suspect; an aircraft heard in ADS-B switches like any other.
     #[test]
     fn an_aircraft_heard_only_by_mlat_keeps_to_constant_velocity() {
         // (squared error, NEES) summed after the first 30 s, and their count.
-        let score = |mlat_only: bool| {
+        let score = |mlat_only: bool, suspect: bool| {
             let (mut se, mut nees, mut n) = (0.0, 0.0, 0usize);
             for seed in 1..=20 {
-                for r in multilaterated(mlat_only, seed, false).iter().filter(|r| r.est.t > 130.0) {
+                let records = multilaterated(mlat_only, seed, suspect, suspect);
+                for r in records.iter().filter(|r| r.est.t > 130.0) {
                     let (lat, lon, _) = at(r.est.t);
                     let plane = Plane::new(lat, lon, 3000.0);
                     let d = Vector2::from(plane.to_en(r.est.lat, r.est.lon));
@@ -1103,14 +1110,18 @@ mod tests {
             }
             ((se / n as f64).sqrt(), nees / n as f64)
         };
-        let (rmse_home, nees_home) = score(true);
-        let (rmse_sticky, nees_sticky) = score(false);
+        let (rmse_home, nees_home) = score(true, false);
+        let (rmse_sticky, nees_sticky) = score(false, false);
         eprintln!("MLAT only: {rmse_home:.1} m NEES {nees_home:.2}; as ADS-B aircraft: {rmse_sticky:.1} m NEES {nees_sticky:.2}");
         assert!(rmse_home < 0.8 * rmse_sticky, "{rmse_home} against {rmse_sticky}");
         assert!(nees_home > 1.2 && nees_home < 2.0, "{nees_home}");
+        let (rmse_suspect, _) = score(true, true);
+        let (rmse_suspect_sticky, _) = score(false, true);
+        eprintln!("flagged as suspect: {rmse_suspect:.1} m; as ADS-B aircraft: {rmse_suspect_sticky:.1} m");
+        assert!(rmse_suspect < 0.8 * rmse_suspect_sticky, "{rmse_suspect} against {rmse_suspect_sticky}");
         // Heard in ADS-B first: the same records whichever matrix MLAT-only
         // aircraft would have.
-        assert_eq!(multilaterated(true, 1, true), multilaterated(false, 1, true));
+        assert_eq!(multilaterated(true, 1, true, false), multilaterated(false, 1, true, false));
     }
 
     /// Track-to-track fusion of a pair too far apart in time: once the MLAT
