@@ -473,12 +473,6 @@ impl Fuser {
         }
         let a = self.aircraft.get_mut(&addr).expect("inserted");
         a.last_heard = now;
-        if m.source == Source::Adsb && !a.adsb_heard {
-            a.adsb_heard = true;
-            for t in std::iter::once(&mut a.fused).chain(&mut a.single) {
-                t.set_spec(self.spec.clone());
-            }
-        }
         if nac_p.is_some() && m.source == Source::Adsb {
             a.nac_p = nac_p;
         }
@@ -558,6 +552,14 @@ impl Fuser {
         let Some(a) = self.aircraft.get_mut(&addr) else {
             return;
         };
+        if m.source == Source::Adsb && !a.adsb_heard {
+            // From its first ADS-B on, in time order: a late measurement
+            // re-run from the history switches as it did the first time.
+            a.adsb_heard = true;
+            for track in std::iter::once(&mut a.fused).chain(&mut a.single) {
+                track.set_spec(m.t, self.spec.clone());
+            }
+        }
         // A flagged aircraft's ADS-B stays out of the fused track.
         let into_fused = !(a.adsb_suspect && m.source == Source::Adsb);
         let outcome = if into_fused {
@@ -695,7 +697,7 @@ impl Fuser {
         };
         a.adsb_suspect = suspect;
         // Its ADS-B kept out, the fused track is fed by MLAT alone.
-        a.fused.set_spec(if suspect { &self.spec_mlat_only } else { &self.spec }.clone());
+        a.fused.set_spec(t, if suspect { &self.spec_mlat_only } else { &self.spec }.clone());
         self.stats.suspect_flags += suspect as u64;
         if suspect {
             tracing::warn!(hex = format!("{addr:06X}"), offset_m, "ADS-B position contradicted by timing");

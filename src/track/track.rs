@@ -28,6 +28,8 @@
 use std::collections::VecDeque;
 use std::sync::Arc;
 
+use smallvec::SmallVec;
+
 use nalgebra::{Matrix2, Matrix6, Vector2, Vector6};
 
 use super::config::TrackConfig;
@@ -325,7 +327,11 @@ const INIT_ACCEL_SIGMA: f64 = 2.0;
 
 #[derive(Clone, Debug)]
 pub struct Track {
-    spec: Arc<ImmSpec>,
+    /// The models' switching matrices by the time from which each applies,
+    /// oldest first (one, unless `set_spec` changed it within the reorder
+    /// window): a step re-run from the history switches as it did when it
+    /// first ran.
+    specs: SmallVec<[(f64, Arc<ImmSpec>); 2]>,
     cfg: Arc<TrackConfig>,
     gate: f64,
     state: State,
@@ -357,7 +363,7 @@ impl Track {
         let gate = -2.0 * (1.0 - cfg.gate_probability).ln();
         let prior = Vb::prior(cfg.vb_prior);
         Track {
-            spec,
+            specs: smallvec::smallvec![(f64::NEG_INFINITY, spec)],
             gate,
             state: State {
                 t: f64::NEG_INFINITY,
@@ -385,19 +391,31 @@ impl Track {
         }
     }
 
-    /// Changes the models' switching matrix (the same models) from now on.
-    pub fn set_spec(&mut self, spec: Arc<ImmSpec>) {
-        self.spec = spec;
-        self.sync_spec();
+    /// Changes the models' switching matrix (the same models) for the steps
+    /// from `t` on, or from just after the newest step already taken when `t`
+    /// is not after it (those keep the matrix they ran with).
+    pub fn set_spec(&mut self, t: f64, spec: Arc<ImmSpec>) {
+        if Arc::ptr_eq(&self.specs[self.specs.len() - 1].1, &spec) {
+            return;
+        }
+        let newest = self.state.t;
+        let from = if t > newest { t } else { f64::from_bits(newest.to_bits() + 1) };
+        self.specs.retain(|(f, _)| *f < from);
+        // The next step of this state is at `from` or later.
+        if let Some(imm) = &mut self.state.imm {
+            imm.spec = spec.clone();
+        }
+        self.specs.push((from, spec));
+        // Nothing older than the history is ever run again.
+        let oldest = self.history.front().map_or(newest, |(m, _)| m.t);
+        while self.specs.len() > 1 && self.specs[1].0 <= oldest {
+            self.specs.remove(0);
+        }
     }
 
-    /// A state restored from the history may predate `set_spec`.
-    fn sync_spec(&mut self) {
-        if let Some(imm) = &mut self.state.imm {
-            if !Arc::ptr_eq(&imm.spec, &self.spec) {
-                imm.spec = self.spec.clone();
-            }
-        }
+    /// The matrix of a step at `t`.
+    fn spec_at(specs: &[(f64, Arc<ImmSpec>)], t: f64) -> &Arc<ImmSpec> {
+        &specs.iter().rev().find(|(from, _)| *from <= t).unwrap_or(&specs[0]).1
     }
 
     /// Time of the newest applied measurement.
@@ -436,7 +454,6 @@ impl Track {
             let (first, before) = tail.next().expect("a newer measurement exists");
             let rest: Vec<Measurement> = std::iter::once(first).chain(tail.map(|(h, _)| h)).collect();
             self.state = *before.expect("found with a copy");
-            self.sync_spec();
             let (older, newer) = rest.split_at(i - j);
             for h in older {
                 self.apply_and_store(*h);
@@ -490,7 +507,7 @@ impl Track {
     fn replayed(&self, i: usize) -> State {
         let j = self.nearest_copy(i);
         let mut scratch = Track {
-            spec: self.spec.clone(),
+            specs: self.specs.clone(),
             cfg: self.cfg.clone(),
             gate: self.gate,
             state: self.history[j].1.as_deref().expect("found with a copy").clone(),
@@ -504,7 +521,6 @@ impl Track {
             keep_gain: false,
             gain: None,
         };
-        scratch.sync_spec();
         for (h, _) in self.history.range(j..i) {
             scratch.apply_one(h);
         }
@@ -526,6 +542,14 @@ impl Track {
 
     fn apply_one(&mut self, m: &Measurement) -> Outcome {
         let dt = if self.state.t_h.is_finite() { m.t - self.state.t_h } else { 0.0 };
+        // A state restored from the history may be older than a change of
+        // matrix (with one matrix, every state has it).
+        if let (Some(imm), true) = (&mut self.state.imm, self.specs.len() > 1) {
+            let spec = Self::spec_at(&self.specs, m.t);
+            if !Arc::ptr_eq(&imm.spec, spec) {
+                imm.spec = spec.clone();
+            }
+        }
         let outcome = match m.obs {
             Observation::Position { lat, lon, cov_en, height, time_sigma_s, claimed, .. } => {
                 if let Some((h, var)) = height {
@@ -816,7 +840,8 @@ impl Track {
         let mut p = Matrix6::from_diagonal(&Vector6::new(0.0, 0.0, vs, vs, va, va));
         p.fixed_view_mut::<2, 2>(0, 0).copy_from(&cov_en);
         self.state.plane = Some(plane);
-        self.state.imm = Some(Imm::with_spec(self.spec.clone(), Gaussian { x: Vector6::zeros(), p }));
+        let spec = Self::spec_at(&self.specs, self.state.t).clone();
+        self.state.imm = Some(Imm::with_spec(spec, Gaussian { x: Vector6::zeros(), p }));
         self.state.gated_in_a_row = 0;
         self.state.accepted_since_start = 0;
     }
@@ -992,6 +1017,56 @@ mod tests {
         assert_eq!(a.stage, Stage::Confirmed);
         // Older than the window: refused, not misapplied.
         assert_eq!(b.apply(pos(1.0, 45.0, 5.0, 10.0)), Outcome::TooLate);
+    }
+
+    /// A switching matrix changed part way (an aircraft first heard in
+    /// ADS-B): measurements held back and re-run across the change give the
+    /// track of the same measurements in order, each step with the matrix
+    /// of its time.
+    #[test]
+    fn a_late_measurement_runs_with_the_switching_matrix_of_its_time() {
+        let cfg = Arc::new(TrackConfig::default());
+        let (spec, other) = (cfg.imm_spec(), cfg.imm_spec_mlat_only(&cfg.imm_spec()));
+        let ms: Vec<Measurement> = (0..40)
+            .map(|k| {
+                let t = k as f64 * 0.5;
+                let (lat, lon) = truth(t);
+                let d = 40.0 * ((k * 7919) % 13) as f64 / 13.0 - 20.0;
+                let (lat, lon, _) = crate::geo::displace(lat, lon, 3000.0, [d, -d, 0.0]);
+                pos(t, lat, lon, 30.0)
+            })
+            .collect();
+        let run = |hold: bool, switch: bool| {
+            let mut tr = Track::new(cfg.clone(), spec.clone());
+            let mut held: Vec<Measurement> = Vec::new();
+            for (k, m) in ms.iter().enumerate() {
+                held.retain(|h| {
+                    let due = h.t + 0.7 <= m.t;
+                    if due {
+                        tr.apply(*h);
+                    }
+                    !due
+                });
+                if switch && m.t == 10.0 {
+                    tr.set_spec(10.0, other.clone());
+                }
+                if hold && k % 3 == 1 {
+                    held.push(*m);
+                } else {
+                    tr.apply(*m);
+                }
+            }
+            for h in held {
+                tr.apply(h);
+            }
+            [18.2, 19.5].map(|t| tr.estimate_at(t).unwrap().state)
+        };
+        let (in_order, late, unswitched) = (run(false, true), run(true, true), run(false, false));
+        for i in 0..2 {
+            assert!((in_order[i].x - late[i].x).norm() < 1e-6, "{:?} vs {:?}", in_order[i].x, late[i].x);
+            assert!((in_order[i].p - late[i].p).norm() < 1e-6);
+            assert!((in_order[i].x - unswitched[i].x).norm() > 1e-3, "the matrix changed nothing");
+        }
     }
 
     #[test]
