@@ -19,6 +19,7 @@ use crate::feed::RawFrame;
 use crate::fuse::conformance::{ConformanceConfig, Monitor};
 use crate::geo::geodetic_to_ecef;
 use crate::geo::{FT_TO_M, KT_TO_MS};
+use crate::mlat::baro::RegionalBaro;
 use crate::mlat::engine::baro_height;
 use crate::mlat::group::{Added, Group, GroupInfo, Grouper};
 use crate::mlat::Mlat;
@@ -69,6 +70,8 @@ pub struct Front {
     stats: CoreStats,
     min_sync_nacp: u8,
     baro_sigma_m: f64,
+    /// The region's GNSS-baro difference, for aircraft that report none.
+    baro: RegionalBaro,
     /// Time-of-applicability sigma of ADS-B positions: GPS-timed, arrival-timed (s).
     time_sigma: (f64, f64),
     sync_inflation: f64,
@@ -95,6 +98,7 @@ impl Front {
             stats: CoreStats::default(),
             min_sync_nacp: cfg.mlat.min_sync_nacp,
             baro_sigma_m: cfg.mlat.baro_sigma_m,
+            baro: RegionalBaro::default(),
             time_sigma: (cfg.track.adsb_time_sigma_gps_s, cfg.track.adsb_time_sigma_arrival_s),
             sync_inflation: cfg.track.mlat_sync_inflation,
         }
@@ -226,7 +230,6 @@ impl Front {
             df: d.msg.df,
             addr: d.msg.addr,
             addr_known: d.trusted(),
-            gnss_baro_diff_ft: d.gnss_baro_diff_ft,
             ..Default::default()
         };
         match d.msg.body {
@@ -234,10 +237,16 @@ impl Front {
             Body::Extended(es) => {
                 if let Es::AirbornePosition { alt_ft, gnss: false, .. } = es.kind {
                     info.alt_baro_ft = alt_ft;
+                    // An ADS-B aircraft's altitude with its own difference:
+                    // what the region's is learnt from.
+                    if let (Some(a), Some(diff), true) = (alt_ft, d.gnss_baro_diff_ft, d.trusted()) {
+                        self.baro.observe(a, diff, arrival);
+                    }
                 }
             }
             _ => {}
         }
+        info.baro_correction = info.alt_baro_ft.and_then(|a| self.baro.correction(d.gnss_baro_diff_ft, a));
         // Only extended squitters (positions, velocities) need their time of
         // applicability: worked out once, and only for them.
         let timing = matches!(d.msg.body, Body::Extended(_)).then(|| self.frame_time(rx, arrival, frame));
@@ -381,7 +390,8 @@ impl Front {
             return;
         }
         let height_and_var = |alt_ft: i32| {
-            let (h, sigma) = baro_height(alt_ft, d.gnss_baro_diff_ft, baro_sigma_m);
+            let (h, sigma) =
+                baro_height(alt_ft, self.baro.correction(d.gnss_baro_diff_ft, alt_ft), baro_sigma_m);
             (h, sigma * sigma)
         };
         match d.msg.body {
@@ -452,7 +462,8 @@ impl Front {
                 (Some(a as f64 * FT_TO_M), None, Some(15.0))
             }
             Es::AirbornePosition { alt_ft: Some(a), gnss: false, .. } => {
-                let (h, sigma) = baro_height(a, d.gnss_baro_diff_ft, self.baro_sigma_m);
+                let (h, sigma) =
+                    baro_height(a, self.baro.correction(d.gnss_baro_diff_ft, a), self.baro_sigma_m);
                 (Some(h), Some(a), Some(sigma))
             }
             _ => (None, None, None),

@@ -20,18 +20,18 @@ use super::sync::{ClockSync, GroupVec, LocalCopy};
 use crate::feed::capture::{ClockKind, ReceiverDecl};
 use crate::geo::{ecef_distance, geodetic_to_ecef, FT_TO_M};
 
-/// 1-sigma (m) of a height from a barometric altitude and the aircraft's own
-/// GNSS-baro difference (both in 25 ft steps; the difference a few seconds
-/// old).
-const GNSS_DIFF_SIGMA_M: f64 = 8.0;
+use super::baro::BaroCorrection;
 
 /// Height above the ellipsoid (m) of a barometric altitude, and its 1-sigma
 /// (m): corrected by the aircraft's own GNSS-baro difference when it reports
-/// one, else taken as is with the configured `baro_sigma_m`. One rule for
-/// the MLAT solver's altitude constraint and the tracker's heights.
-pub fn baro_height(alt_ft: i32, gnss_baro_diff_ft: Option<i32>, baro_sigma_m: f64) -> (f64, f64) {
-    let sigma = if gnss_baro_diff_ft.is_some() { GNSS_DIFF_SIGMA_M } else { baro_sigma_m };
-    ((alt_ft + gnss_baro_diff_ft.unwrap_or(0)) as f64 * FT_TO_M, sigma)
+/// one, or the region's (`baro`), else taken as is with the configured
+/// `baro_sigma_m`. One rule for the MLAT solver's altitude constraint and
+/// the tracker's heights.
+pub fn baro_height(alt_ft: i32, correction: Option<BaroCorrection>, baro_sigma_m: f64) -> (f64, f64) {
+    match correction {
+        Some(c) => ((alt_ft as f64 + c.diff_ft) * FT_TO_M, c.sigma_m),
+        None => (alt_ft as f64 * FT_TO_M, baro_sigma_m),
+    }
 }
 
 /// The receivers of one measurement (more than one when they stand too close
@@ -226,7 +226,7 @@ impl Rx {
 struct AcState {
     /// Latest barometric altitude (ft), when (s), and the GNSS-baro
     /// difference known then (ft).
-    alt_ft: Option<(i32, f64, Option<i32>)>,
+    alt_ft: Option<(i32, f64, Option<BaroCorrection>)>,
     /// Newest fix with redundancy (ECEF, server time): the solver's start.
     /// One without redundancy could be the wrong of its two solutions: taken
     /// as the next one's start, each led a chain of them down that branch
@@ -347,8 +347,8 @@ impl Mlat {
 
     /// An altitude heard from an aircraft (any message), for later
     /// constraints, with the aircraft's GNSS-baro difference when known.
-    pub fn note_altitude(&mut self, addr: u32, alt_ft: i32, gnss_baro_diff_ft: Option<i32>, now: f64) {
-        self.aircraft.entry(addr).or_default().alt_ft = Some((alt_ft, now, gnss_baro_diff_ft));
+    pub fn note_altitude(&mut self, addr: u32, alt_ft: i32, correction: Option<BaroCorrection>, now: f64) {
+        self.aircraft.entry(addr).or_default().alt_ft = Some((alt_ft, now, correction));
     }
 
     /// One line of MLAT state: valid pairs, sync residual per receiver (ns),
@@ -484,7 +484,7 @@ impl Mlat {
             }
         }
         if let Some(a) = info.alt_baro_ft {
-            self.note_altitude(info.addr, a, info.gnss_baro_diff_ft, now);
+            self.note_altitude(info.addr, a, info.baro_correction, now);
         }
         if info.adsb_ecef.is_some() {
             self.aircraft.entry(info.addr).or_default().last_adsb = Some(now);
@@ -846,7 +846,7 @@ mod tests {
             let (mut m, rxs) = engine();
             let t = 1_700_000_000.0;
             let mut g = group(&rxs[..4], target, t);
-            g.info.gnss_baro_diff_ft = diff;
+            g.info.baro_correction = diff.map(BaroCorrection::own);
             let f = m.on_group(&g, t + 0.2).expect("fix");
             (crate::geo::distance_m(f.lat, f.lon, lat, lon), f.cov_en[0][0] + f.cov_en[1][1])
         };

@@ -32,9 +32,10 @@ pub struct GroupInfo {
     pub addr_known: bool,
     /// Barometric altitude carried by this transmission (ft).
     pub alt_baro_ft: Option<i32>,
-    /// The aircraft's latest GNSS height above the ellipsoid minus its
-    /// barometric altitude (ft), from its ADS-B velocity messages.
-    pub gnss_baro_diff_ft: Option<i32>,
+    /// What to add to its barometric altitude for its height above the
+    /// ellipsoid: its own latest GNSS-baro difference (ADS-B velocity
+    /// messages), or else the region's.
+    pub baro_correction: Option<super::baro::BaroCorrection>,
     /// ADS-B position of this very transmission (ECEF, m) and its 1-sigma
     /// horizontal error (m): a clock synchronisation source.
     pub adsb_ecef: Option<[f64; 3]>,

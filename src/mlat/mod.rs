@@ -1,8 +1,10 @@
 //! Multilateration stage: [`group`]ing copies of one transmission across
 //! receivers, [`clock`] synchronisation of receiver pairs and the network
-//! time base ([`sync`]), the TDOA [`solver`], and the [`engine`] that turns
-//! complete groups into fixes.
+//! time base ([`sync`]), the TDOA [`solver`], the [`engine`] that turns
+//! complete groups into fixes, and the region's GNSS-baro difference
+//! ([`baro`]) that turns barometric altitudes into heights.
 
+pub mod baro;
 pub mod clock;
 pub mod engine;
 pub mod group;
