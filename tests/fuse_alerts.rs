@@ -57,6 +57,22 @@ fn head_on_at_fl350_alerts_48_to_35_s_ahead_and_a_5_nm_pass_stays_quiet() {
     assert!(quiet, "NACp 9: 0.8 s outside conflicts");
 }
 
+/// The head-on pair of the encounter passing just inside the 1 NM
+/// miss-distance limit (1,840 m apart): the predicted miss, from tracks
+/// with metres of noise, crosses the limit back and forth; the alert is
+/// raised once and held until the aircraft have passed, not raised and
+/// cleared with each crossing.
+#[test]
+fn a_pair_passing_at_the_miss_limit_raises_one_alert() {
+    let mut s = scenario("encounter");
+    s.aircraft[1].start.lat += 1_840.0 / 111_195.0;
+    let (records, _) = run(&s);
+    let conflicts = alerts(&records, "conflict");
+    let pair = |a: &&&Value| a["pair"].as_array().unwrap().iter().any(|h| h == "4B0002");
+    let raised = conflicts.iter().filter(pair).filter(|a| a["active"] == true).count();
+    assert_eq!(raised, 1, "{conflicts:?}");
+}
+
 /// The 8-segment world with its aircraft broadcasting positions offset by `offset`.
 fn spoofed(offset: Option<[f64; 2]>) -> (Vec<Value>, f64) {
     let mut s = scenario("fusion-8seg-1hz");

@@ -31,11 +31,15 @@ pub struct ConflictConfig {
     pub max_miss_nm: f64,
     /// How often pairs are examined (s).
     pub interval_s: f64,
+    /// An alert clears once its pair has failed the test this long (s): a
+    /// pair whose predicted miss hovers at the limit raised and cleared an
+    /// alert every second or two without it.
+    pub clear_after_s: f64,
 }
 
 impl Default for ConflictConfig {
     fn default() -> Self {
-        ConflictConfig { enabled: true, max_miss_nm: 1.0, interval_s: 1.0 }
+        ConflictConfig { enabled: true, max_miss_nm: 1.0, interval_s: 1.0, clear_after_s: 3.0 }
     }
 }
 
@@ -46,6 +50,9 @@ impl ConflictConfig {
         }
         if !(self.interval_s > 0.0 && self.interval_s.is_finite()) {
             return Err(format!("interval_s = {} must be positive", self.interval_s));
+        }
+        if !(self.clear_after_s >= 0.0 && self.clear_after_s.is_finite()) {
+            return Err(format!("clear_after_s = {} must be zero or positive", self.clear_after_s));
         }
         Ok(())
     }

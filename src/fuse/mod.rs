@@ -257,6 +257,10 @@ impl Waiting {
     }
 }
 
+/// An active conflict's alert stays up to this many times the predicted miss
+/// distance that raises it.
+const HOLD_MISS_FACTOR: f64 = 1.25;
+
 /// Slower tracks (taxiing, parked) are left out of conflict prediction (m/s).
 const MIN_CONFLICT_SPEED_MPS: f64 = 30.0;
 
@@ -320,7 +324,8 @@ pub struct Fuser {
     next_id: u64,
     next_sweep: f64,
     next_conflict: f64,
-    conflicts: FastMap<(u32, u32), conflict::Conflict>,
+    /// Active conflicts: the latest assessment and when the pair last met the test.
+    conflicts: FastMap<(u32, u32), (conflict::Conflict, f64)>,
     pub publish_source_tracks: bool,
     /// Single-source tracks are kept (track-to-track fusion, or published).
     singles: bool,
@@ -748,10 +753,25 @@ impl Fuser {
                     .collect()
             }
         };
-        let found: FastMap<(u32, u32), conflict::Conflict> = conflict::find(&self.cfg.conflict, &kin)
+        // An active pair keeps its alert up to a predicted miss a quarter
+        // larger than the one that raises it, and until it has failed the
+        // test for `clear_after_s`: pairs passing about the limit apart
+        // raised and cleared alerts every few seconds.
+        let cfg = &self.cfg.conflict;
+        let raise_m = cfg.max_miss_nm * conflict::NM;
+        let relaxed =
+            conflict::ConflictConfig { max_miss_nm: cfg.max_miss_nm * HOLD_MISS_FACTOR, ..cfg.clone() };
+        let mut found: FastMap<(u32, u32), (conflict::Conflict, f64)> = conflict::find(&relaxed, &kin)
             .into_iter()
-            .map(|c| ((c.a.min(c.b), c.a.max(c.b)), c))
+            .map(|c| ((c.a.min(c.b), c.a.max(c.b)), (c, now)))
+            .filter(|(k, (c, _))| c.miss_m < raise_m || self.conflicts.contains_key(k))
             .collect();
+        let hold = cfg.clear_after_s;
+        for (k, &(c, met)) in &self.conflicts {
+            if !found.contains_key(k) && now - met < hold {
+                found.insert(*k, (c, met));
+            }
+        }
         for a in self.aircraft.values_mut() {
             a.in_conflict = false;
         }
@@ -766,8 +786,10 @@ impl Fuser {
         let mut changes: Vec<(bool, conflict::Conflict)> = found
             .iter()
             .filter(|(k, _)| !self.conflicts.contains_key(k))
-            .map(|(_, c)| (true, *c))
-            .chain(self.conflicts.iter().filter(|(k, _)| !found.contains_key(k)).map(|(_, c)| (false, *c)))
+            .map(|(_, (c, _))| (true, *c))
+            .chain(
+                self.conflicts.iter().filter(|(k, _)| !found.contains_key(k)).map(|(_, (c, _))| (false, *c)),
+            )
             .collect();
         changes.sort_by_key(|(active, c)| (!active, c.a.min(c.b), c.a.max(c.b)));
         for (active, c) in changes {
