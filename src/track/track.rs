@@ -990,18 +990,23 @@ mod tests {
         }
     }
 
-    #[test]
-    fn late_measurements_give_the_same_track_as_in_order() {
-        let ms: Vec<Measurement> = (0..40)
+    /// Positions of the test flight every 0.5 s for 20 s, with a
+    /// deterministic wobble of up to `wobble` m as noise, claimed at `sigma`.
+    fn wobbled(wobble: f64, sigma: f64) -> Vec<Measurement> {
+        (0..40)
             .map(|k| {
                 let t = k as f64 * 0.5;
                 let (lat, lon) = truth(t);
-                // A deterministic wobble as noise.
-                let d = 20.0 * ((k * 7919) % 13) as f64 / 13.0 - 10.0;
+                let d = wobble * (2.0 * ((k * 7919) % 13) as f64 / 13.0 - 1.0);
                 let (lat, lon, _) = crate::geo::displace(lat, lon, 3000.0, [d, -d, 0.0]);
-                pos(t, lat, lon, 10.0)
+                pos(t, lat, lon, sigma)
             })
-            .collect();
+            .collect()
+    }
+
+    #[test]
+    fn late_measurements_give_the_same_track_as_in_order() {
+        let ms = wobbled(10.0, 10.0);
         let mut a = track();
         for m in &ms {
             a.apply(*m);
@@ -1047,15 +1052,7 @@ mod tests {
     fn a_late_measurement_runs_with_the_switching_matrix_of_its_time() {
         let cfg = Arc::new(TrackConfig::default());
         let (spec, other) = (cfg.imm_spec(), cfg.imm_spec_mlat_only(&cfg.imm_spec()));
-        let ms: Vec<Measurement> = (0..40)
-            .map(|k| {
-                let t = k as f64 * 0.5;
-                let (lat, lon) = truth(t);
-                let d = 40.0 * ((k * 7919) % 13) as f64 / 13.0 - 20.0;
-                let (lat, lon, _) = crate::geo::displace(lat, lon, 3000.0, [d, -d, 0.0]);
-                pos(t, lat, lon, 30.0)
-            })
-            .collect();
+        let ms = wobbled(20.0, 30.0);
         let run = |hold: bool, switch: bool| {
             let mut tr = Track::new(cfg.clone(), spec.clone());
             let mut held: Vec<Measurement> = Vec::new();
