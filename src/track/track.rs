@@ -422,6 +422,7 @@ impl Track {
             return;
         }
         let newest = self.state.t;
+        // Just after `newest` (times are positive: Unix seconds).
         let from = if t > newest { t } else { f64::from_bits(newest.to_bits() + 1) };
         self.specs.retain(|(f, _)| *f < from);
         // The next step of this state is at `from` or later.
