@@ -163,6 +163,9 @@ fn a_misplaced_receiver_is_excluded_and_a_restart_does_not_break_mlat() {
     // MLAT goes on: fixes after the restart use rx08 again and stay accurate.
     let mut late_with_rx08 = 0;
     let mut errs = Vec::new();
+    // Heights of the Mode S-only aircraft's fixes (their altitude replies
+    // made heights with the region's GNSS-baro difference: 45 m here).
+    let mut mode_s_dh = Vec::new();
     for e in &events {
         let Event::Mlat(f) = e else { continue };
         if f.t > s.start_unix + 100.0 && f.receivers.contains(&7) {
@@ -171,8 +174,15 @@ fn a_misplaced_receiver_is_excluded_and_a_restart_does_not_break_mlat() {
         if let Some(p) = truth.position(&format!("{:06X}", f.addr), f.t) {
             let d = en(p.0, p.1, f.lat, f.lon);
             errs.push(d[0].hypot(d[1]));
+            if f.addr - s.traffic[0].first_hex < 10 && f.altitude_used && f.t > s.start_unix + 30.0 {
+                mode_s_dh.push((f.alt_m - p.2).abs());
+            }
         }
     }
+    mode_s_dh.sort_by(f64::total_cmp);
+    let dh = mode_s_dh[mode_s_dh.len() / 2];
+    eprintln!("Mode S-only fixes: median height error {dh:.1} m over {}", mode_s_dh.len());
+    assert!(dh < 15.0, "Mode S-only fixes' median height error {dh} m");
     errs.sort_by(f64::total_cmp);
     let median = errs[errs.len() / 2];
     eprintln!(
