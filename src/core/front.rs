@@ -19,7 +19,7 @@ use crate::feed::RawFrame;
 use crate::fuse::conformance::{ConformanceConfig, Monitor};
 use crate::geo::geodetic_to_ecef;
 use crate::geo::{FT_TO_M, KT_TO_MS};
-use crate::mlat::baro::RegionalBaro;
+use crate::mlat::baro::{BaroCorrection, RegionalBaro};
 use crate::mlat::engine::baro_height;
 use crate::mlat::group::{Added, Group, GroupInfo, Grouper};
 use crate::mlat::Mlat;
@@ -250,7 +250,7 @@ impl Front {
         // Only extended squitters (positions, velocities) need their time of
         // applicability: worked out once, and only for them.
         let timing = matches!(d.msg.body, Body::Extended(_)).then(|| self.frame_time(rx, arrival, frame));
-        let report = timing.and_then(|timing| self.position_report(rx, timing, &d));
+        let report = timing.and_then(|timing| self.position_report(rx, timing, &d, info.baro_correction));
         // A monitored aircraft is heard: it stays monitored (as its track stays).
         info.suspect = match (self.watched.get_mut(&d.msg.addr), d.trusted()) {
             (Some(w), true) => {
@@ -275,7 +275,7 @@ impl Front {
             self.stats.positions += 1;
             cmds.push(Cmd::Event(Event::Position(p)));
         }
-        self.feed_tracker(cmds, arrival, timing, &d, report.as_ref());
+        self.feed_tracker(cmds, arrival, timing, &d, report.as_ref(), info.baro_correction);
     }
 
     /// Time of applicability of a frame: exact for GPS-timed receivers, and
@@ -343,7 +343,9 @@ impl Front {
 
     /// What a decoded frame tells the tracker: positions, velocities,
     /// altitudes, and identity.
-    /// `timing`: the frame's time of applicability, for extended squitters.
+    /// `timing`: the frame's time of applicability, for extended squitters;
+    /// `correction`: what makes its barometric altitude a height (the one the
+    /// MLAT solver is given).
     fn feed_tracker(
         &mut self,
         cmds: &mut Vec<Cmd>,
@@ -351,6 +353,7 @@ impl Front {
         timing: Option<(f64, Dating)>,
         d: &crate::modes::Decoded,
         report: Option<&PositionReport>,
+        correction: Option<BaroCorrection>,
     ) {
         if !d.trusted() {
             return;
@@ -390,8 +393,7 @@ impl Front {
             return;
         }
         let height_and_var = |alt_ft: i32| {
-            let (h, sigma) =
-                baro_height(alt_ft, self.baro.correction(d.gnss_baro_diff_ft, alt_ft), baro_sigma_m);
+            let (h, sigma) = baro_height(alt_ft, correction, baro_sigma_m);
             (h, sigma * sigma)
         };
         match d.msg.body {
@@ -447,12 +449,14 @@ impl Front {
         }
     }
 
-    /// The ADS-B position report of a decoded frame, if it has a published position.
+    /// The ADS-B position report of a decoded frame, if it has a published
+    /// position; `correction` makes its barometric altitude a height.
     fn position_report(
         &self,
         rx: usize,
         (t, dating): (f64, Dating),
         d: &crate::modes::Decoded,
+        correction: Option<BaroCorrection>,
     ) -> Option<PositionReport> {
         let (Some(p), Body::Extended(es)) = (d.position.filter(|p| p.reliable), d.msg.body) else {
             return None;
@@ -462,8 +466,7 @@ impl Front {
                 (Some(a as f64 * FT_TO_M), None, Some(15.0))
             }
             Es::AirbornePosition { alt_ft: Some(a), gnss: false, .. } => {
-                let (h, sigma) =
-                    baro_height(a, self.baro.correction(d.gnss_baro_diff_ft, a), self.baro_sigma_m);
+                let (h, sigma) = baro_height(a, correction, self.baro_sigma_m);
                 (Some(h), Some(a), Some(sigma))
             }
             _ => (None, None, None),

@@ -1074,7 +1074,7 @@ mod tests {
         let mut f = Fuser::new(FuseConfig::default(), tcfg, false);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let noise = Normal::new(0.0, 150.0).expect("sigma");
-        let (mut out, mut records) = (Vec::new(), Vec::new());
+        let mut out = Vec::new();
         if adsb_first {
             let (lat, lon, _) = at(100.0);
             f.on_measurement(1, Some(8), pos(100.0, lat, lon), 100.0, &mut out);
@@ -1104,11 +1104,12 @@ mod tests {
             f.on_measurement(1, None, m, t + 0.5, &mut out);
         }
         f.finish(&mut out);
-        records.extend(out.into_iter().filter_map(|o| match o {
-            Output::Track(r) if r.source == "fused" => Some(*r),
-            _ => None,
-        }));
-        records
+        out.into_iter()
+            .filter_map(|o| match o {
+                Output::Track(r) if r.source == "fused" => Some(*r),
+                _ => None,
+            })
+            .collect()
     }
 
     /// An aircraft heard only through MLAT, hundreds of metres per fix, flying
