@@ -138,3 +138,21 @@ fn fixes_synchronised_on_their_own_aircraft_are_not_news_to_its_fused_track() {
     assert!(fused.h_rmse_m < 1.05 * adsb.h_rmse_m, "{fused:?} {adsb:?}");
     assert!(fused.nees.unwrap() < 1.5 * adsb.nees.unwrap(), "{fused:?} {adsb:?}");
 }
+
+/// The IMM told the 1 Hz benchmark's own manoeuvres (turns at +-3 deg/s,
+/// speed changes of exactly +-3 m/s^2; fixtures/configs/benchmark-
+/// accelerations.toml) is what the paper's 8.85 m needs, and it must stay
+/// consistent. It drifted to 9.01 m (NEES 2.08) unnoticed when a
+/// transmission heard both ways became one IMM step: its staying
+/// probability had been tuned for two.
+#[test]
+fn the_benchmark_model_set_stays_near_the_papers_figure() {
+    let tuned = runs("fusion-8seg-1hz", Some("benchmark-accelerations"), &[Method::Measurement], 1..401);
+    let default = runs("fusion-8seg-1hz", None, &[Method::Measurement], 1..401);
+    let (t, d) = (row(&tuned, "fused/measurement"), row(&default, "fused/measurement"));
+    // Over these 400 seeds (the README's): 8.93 m against the default's
+    // 9.79 m; tuned for two steps, 9.01 m.
+    assert!(t.h_rmse_m < 8.97 && t.h_rmse_m < d.h_rmse_m - 0.6, "{t:?} against {d:?}");
+    let (nees, band) = (t.nees.unwrap(), t.nees_band.unwrap());
+    assert!(band[0] <= nees && nees <= band[1], "{t:?}");
+}
