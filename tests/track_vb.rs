@@ -100,12 +100,12 @@ fn report(what: &str, vb: &Runs, plain: &Runs) {
     );
 }
 
-/// Shared by both flights: the scale finds the real ratio within 20% (the
-/// prior's weight, re-entering at every step, keeps it a little low), and
+/// Shared by both flights: the scale finds the real ratio within 10% (344
+/// and 331; with ADS-B's prior as heavy as MLAT's, 310 and 307), and
 /// without VB the claim is believed.
 fn learns_the_ratio(vb: &Runs, plain: &Runs) {
     let m = vb.median_scale();
-    assert!((0.8 * REAL_RATIO..1.2 * REAL_RATIO).contains(&m), "scales {:?}", vb.scales);
+    assert!((0.9 * REAL_RATIO..1.1 * REAL_RATIO).contains(&m), "scales {:?}", vb.scales);
     assert!(plain.nees > 50.0, "without VB the claim is believed: NEES {}", plain.nees);
     assert!(vb.nees < plain.nees / 10.0, "VB NEES {} vs {}", vb.nees, plain.nees);
 }
@@ -121,7 +121,7 @@ fn vb_learns_an_overclaimed_nacp() {
     // with positions this coarse and no velocity reports the likelihoods
     // cannot tell the models apart, and in straight flight the manoeuvre
     // models' share widens the covariance (the same flight with its true
-    // noise claimed honestly: 1.6-1.8; README, Tracking).
+    // noise claimed honestly: 1.6; here 1.38; README, Tracking).
     assert!(1.3 < vb.late && vb.late <= vb.late_band[1], "late NEES {} band {:?}", vb.late, vb.late_band);
     assert!(vb.rmse_m < plain.rmse_m / 2.0, "{} vs {}", vb.rmse_m, plain.rmse_m);
 }
