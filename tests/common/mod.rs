@@ -23,9 +23,22 @@ pub fn scratch(name: &str) -> tempfile::TempDir {
     tempfile::Builder::new().prefix(&format!("fuse1090-{name}-")).tempdir().unwrap()
 }
 
-/// A loopback port free a moment ago (the daemons under test bind it).
+/// A loopback port free a moment ago for TCP and UDP (the daemons under test
+/// bind it), and never handed to another test of this process: the kernel
+/// may give a freed port out again, and two daemons whose UDP inputs share
+/// a port (they set SO_REUSEADDR, for SIGHUP's rebinding) split its
+/// datagrams; two live tests running side by side did, and each lost some.
 pub fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+    static GIVEN: std::sync::Mutex<std::collections::BTreeSet<u16>> =
+        std::sync::Mutex::new(std::collections::BTreeSet::new());
+    loop {
+        let tcp = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let port = tcp.local_addr().unwrap().port();
+        let udp_free = std::net::UdpSocket::bind(("127.0.0.1", port)).is_ok();
+        if udp_free && GIVEN.lock().unwrap().insert(port) {
+            return port;
+        }
+    }
 }
 
 /// Every frame of an input, with the arrival time (if the format carries one).
