@@ -491,6 +491,68 @@ fn sighup_moves_a_udp_receiver_to_its_new_source_address() {
     assert_eq!(counted(), before + 7, "the new address's 7 and none of the old one's after the move");
 }
 
+/// A UDP port is one daemon's: a second one configured on it says so
+/// instead of sharing the datagrams; a SIGHUP that changes the inputs
+/// rebinds the port it keeps.
+#[test]
+fn a_udp_port_taken_by_another_daemon_is_refused_and_sighup_rebinds_its_own() {
+    let work = common::scratch("e2e-udp-port");
+    let dir = work.path();
+    let (port, other) = (common::free_port(), common::free_port());
+    let cfg = |extra: &str| {
+        format!(
+            "[service]\nstats_interval_s = 0.2\n\n[[receiver]]\nid = \"rx\"\nlat = 45.0\nlon = 5.0\n\
+             alt_m = 100.0\nclock = \"beast12\"\nsource = \"127.0.3.5\"\n\n[[input]]\nkind = \"udp\"\n\
+             address = \"127.0.0.1:{port}\"\n{extra}"
+        )
+    };
+    let wait_for = |log: &Path, needle: &str| {
+        let t0 = Instant::now();
+        while !std::fs::read_to_string(log).unwrap_or_default().contains(needle) {
+            assert!(t0.elapsed() < Duration::from_secs(10), "no {needle:?} in {}", log.display());
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    };
+    let (cfg_a, log_a, log_b) = (dir.join("a.toml"), dir.join("a.log"), dir.join("b.log"));
+    std::fs::write(&cfg_a, cfg("")).unwrap();
+    let mut a = daemon(&cfg_a, &log_a, None);
+    wait_for(&log_a, "running inputs=");
+    let sender = UdpSocket::bind("127.0.3.5:0").unwrap();
+    let frame = beast_frame();
+    let send_until_counted = |n: u64| {
+        let t0 = Instant::now();
+        while counted(&log_a, "rx") < n {
+            assert!(t0.elapsed() < Duration::from_secs(10), "daemon A counted {}", counted(&log_a, "rx"));
+            sender.send_to(&frame, ("127.0.0.1", port)).unwrap();
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    };
+    send_until_counted(1);
+
+    let cfg_b = dir.join("b.toml");
+    std::fs::write(&cfg_b, cfg("")).unwrap();
+    let mut b = daemon(&cfg_b, &log_b, None);
+    wait_for(&log_b, "input stopped");
+    wait_for(&log_b, "running inputs=");
+    let said = std::fs::read_to_string(&log_b).unwrap();
+    assert!(said.contains(&format!("127.0.0.1:{port}")), "{said}");
+    signal(&b, "TERM");
+    let st = b.wait().unwrap();
+    assert!(st.success(), "{st:?}: {}", std::fs::read_to_string(&log_b).unwrap());
+
+    // Another input added: the inputs are replaced and A's port bound again.
+    std::fs::write(&cfg_a, cfg(&format!("\n[[input]]\nkind = \"udp\"\naddress = \"127.0.0.1:{other}\"\n")))
+        .unwrap();
+    signal(&a, "HUP");
+    wait_for(&log_a, "SIGHUP: configuration re-read");
+    let before = counted(&log_a, "rx");
+    send_until_counted(before + 3);
+    signal(&a, "TERM");
+    assert!(a.wait().unwrap().success());
+    let log = std::fs::read_to_string(&log_a).unwrap();
+    assert!(!log.contains("input stopped"), "{log}");
+}
+
 /// A Beast TCP server input that runs out of file descriptors (more
 /// receivers connected than the process may have descriptors) keeps its
 /// listener: once descriptors are free again, a receiver that connects is

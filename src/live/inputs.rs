@@ -411,7 +411,9 @@ async fn udp(input: &InputConfig, tx: &SyncSender<ToCore>, reg: &Registry) -> st
     let s = Socket::new(domain, Type::DGRAM, Some(Protocol::UDP))?;
     // Bursts of many receivers at once: a large buffer (the kernel caps it).
     let _ = s.set_recv_buffer_size(8 << 20);
-    s.set_reuse_address(true)?;
+    // No SO_REUSEADDR: with it a second daemon on the same port would bind
+    // too and silently take part of the datagrams. A SIGHUP waits for the
+    // old input to close before binding anew.
     s.bind(&input.address.into())?;
     s.set_nonblocking(true)?;
     if let Err(e) = super::stamp::enable(&s) {

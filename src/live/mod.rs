@@ -220,8 +220,10 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
                         tracing::info!("SIGHUP: configuration re-read");
                         let _ = tx.send(ToCore::Outputs(Outputs::new(&new.output, &new.service)));
                         if new.input != current.input {
+                            // Closed before the new ones bind the same ports.
                             for t in tasks.drain(..) {
                                 t.abort();
+                                let _ = t.await;
                             }
                             tasks = new.input.iter().map(|i| inputs::spawn(i.clone(), tx.clone(), registry.clone())).collect();
                         }
