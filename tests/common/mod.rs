@@ -25,9 +25,9 @@ pub fn scratch(name: &str) -> tempfile::TempDir {
 
 /// A loopback port free a moment ago for TCP and UDP (the daemons under test
 /// bind it), and never handed to another test of this process: the kernel
-/// may give a freed port out again, and two daemons whose UDP inputs share
-/// a port (they set SO_REUSEADDR, for SIGHUP's rebinding) split its
-/// datagrams; two live tests running side by side did, and each lost some.
+/// may give a freed port out again, and two live tests running side by side
+/// once got the same one (their daemons, then with SO_REUSEADDR, split its
+/// datagrams; now the second would fail to bind).
 pub fn free_port() -> u16 {
     static GIVEN: std::sync::Mutex<std::collections::BTreeSet<u16>> =
         std::sync::Mutex::new(std::collections::BTreeSet::new());
