@@ -7,8 +7,9 @@
 //! (positions and velocity at ~2 Hz, then a long straight).
 
 use fuse1090::config::Config;
-use fuse1090::eval::montecarlo::{pooled_nees, run_in_memory, runs_band};
+use fuse1090::eval::montecarlo::{pooled_nees, runs_band};
 use fuse1090::eval::{evaluate, Truth};
+use fuse1090::publish::json::write_event;
 use fuse1090::sim::scenario::Scenario;
 use fuse1090::track::Source;
 
@@ -47,7 +48,12 @@ fn adsb_track(scenario: &str, vb: bool, seeds: u64, late_after_s: f64) -> Runs {
         s.seed = seed;
         let (mut cap, mut truth) = (Vec::new(), Vec::new());
         fuse1090::sim::simulate(&s, &mut cap, &mut truth).unwrap();
-        let out = run_in_memory(&cap, &cfg).unwrap();
+        // One run gives both the records and the final scale.
+        let (core, events, _) = common::run_core(&cap, &cfg);
+        let mut out = Vec::new();
+        for ev in &events {
+            write_event(&mut out, ev, |i| core.receiver_id(i));
+        }
         let truth = Truth::read(truth.as_slice()).unwrap();
         let report = evaluate(&truth, out.as_slice()).unwrap();
         let late: String = String::from_utf8_lossy(&out)
@@ -68,7 +74,6 @@ fn adsb_track(scenario: &str, vb: bool, seeds: u64, late_after_s: f64) -> Runs {
             nees += r.nees.unwrap_or(0.0) * r.n as f64;
             n += r.n;
         }
-        let (core, _, _) = common::run_core(&cap, &cfg);
         scales.push(core.fuser().vb_scale(0x3C6DD4, Source::Adsb).unwrap());
     }
     scales.sort_by(f64::total_cmp);
