@@ -88,6 +88,16 @@ fn counted(log: &Path, id: &str) -> u64 {
         .unwrap_or(0)
 }
 
+/// Polls a daemon's log until it holds `needle`: a loaded CI machine may
+/// take its time to start or re-read.
+fn wait_for_log(log: &Path, needle: &str) {
+    let t0 = Instant::now();
+    while !std::fs::read_to_string(log).unwrap_or_default().contains(needle) {
+        assert!(t0.elapsed() < Duration::from_secs(10), "no {needle:?} in {}", log.display());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
 /// Waits up to 5 s for the daemon to close its end of `sock`.
 fn closed_by_the_daemon(sock: &mut TcpStream) -> Result<(), String> {
     sock.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
@@ -447,15 +457,7 @@ fn sighup_moves_a_udp_receiver_to_its_new_source_address() {
     std::fs::write(&cfg_path, cfg("127.0.3.1")).unwrap();
     let log_path = dir.join("hup.log");
     let mut daemon = daemon(&cfg_path, &log_path, None);
-    // Polls the log: a loaded CI machine may take its time to start or re-read.
-    let wait_for = |needle: &str| {
-        let t0 = Instant::now();
-        while !std::fs::read_to_string(&log_path).unwrap_or_default().contains(needle) {
-            assert!(t0.elapsed() < Duration::from_secs(10), "no {needle:?} in the log");
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    };
-    wait_for("running inputs=");
+    wait_for_log(&log_path, "running inputs=");
     // One frame per datagram.
     let frame = beast_frame();
     let send = |from: &str, n: usize| {
@@ -477,7 +479,7 @@ fn sighup_moves_a_udp_receiver_to_its_new_source_address() {
     let before = counted();
     std::fs::write(&cfg_path, cfg("127.0.3.2")).unwrap();
     signal(&daemon, "HUP");
-    wait_for("SIGHUP: configuration re-read");
+    wait_for_log(&log_path, "SIGHUP: configuration re-read");
     send("127.0.3.1", 3);
     send("127.0.3.2", 7);
     std::thread::sleep(Duration::from_millis(500));
@@ -506,17 +508,10 @@ fn a_udp_port_taken_by_another_daemon_is_refused_and_sighup_rebinds_its_own() {
              address = \"127.0.0.1:{port}\"\n{extra}"
         )
     };
-    let wait_for = |log: &Path, needle: &str| {
-        let t0 = Instant::now();
-        while !std::fs::read_to_string(log).unwrap_or_default().contains(needle) {
-            assert!(t0.elapsed() < Duration::from_secs(10), "no {needle:?} in {}", log.display());
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    };
     let (cfg_a, log_a, log_b) = (dir.join("a.toml"), dir.join("a.log"), dir.join("b.log"));
     std::fs::write(&cfg_a, cfg("")).unwrap();
     let mut a = daemon(&cfg_a, &log_a, None);
-    wait_for(&log_a, "running inputs=");
+    wait_for_log(&log_a, "running inputs=");
     let sender = UdpSocket::bind("127.0.3.5:0").unwrap();
     let frame = beast_frame();
     let send_until_counted = |n: u64| {
@@ -532,8 +527,8 @@ fn a_udp_port_taken_by_another_daemon_is_refused_and_sighup_rebinds_its_own() {
     let cfg_b = dir.join("b.toml");
     std::fs::write(&cfg_b, cfg("")).unwrap();
     let mut b = daemon(&cfg_b, &log_b, None);
-    wait_for(&log_b, "input stopped");
-    wait_for(&log_b, "running inputs=");
+    wait_for_log(&log_b, "input stopped");
+    wait_for_log(&log_b, "running inputs=");
     let said = std::fs::read_to_string(&log_b).unwrap();
     assert!(said.contains(&format!("127.0.0.1:{port}")), "{said}");
     signal(&b, "TERM");
@@ -544,7 +539,7 @@ fn a_udp_port_taken_by_another_daemon_is_refused_and_sighup_rebinds_its_own() {
     std::fs::write(&cfg_a, cfg(&format!("\n[[input]]\nkind = \"udp\"\naddress = \"127.0.0.1:{other}\"\n")))
         .unwrap();
     signal(&a, "HUP");
-    wait_for(&log_a, "SIGHUP: configuration re-read");
+    wait_for_log(&log_a, "SIGHUP: configuration re-read");
     let before = counted(&log_a, "rx");
     send_until_counted(before + 3);
     signal(&a, "TERM");
