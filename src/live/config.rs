@@ -148,6 +148,17 @@ pub enum InputKind {
     Udp,
 }
 
+impl InputKind {
+    /// As the configuration spells it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::BeastTcpClient => "beast_tcp_client",
+            Self::BeastTcpServer => "beast_tcp_server",
+            Self::Udp => "udp",
+        }
+    }
+}
+
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct InputConfig {

@@ -214,13 +214,48 @@ async fn stream(
     }
 }
 
-/// Spawns the task of one input.
-pub fn spawn(input: InputConfig, tx: SyncSender<ToCore>, reg: Arc<Registry>) -> tokio::task::JoinHandle<()> {
+/// An input's socket, bound before its task starts: a daemon that cannot
+/// have its ports says so at start-up (and fails there) instead of running
+/// deaf to an input; a TCP client has nothing to bind.
+pub enum Bound {
+    Client,
+    Listener(TcpListener),
+    Udp(UdpSocket),
+}
+
+/// Binds one input's socket.
+pub async fn bind(input: &InputConfig) -> std::io::Result<Bound> {
+    Ok(match input.kind {
+        InputKind::BeastTcpClient => Bound::Client,
+        InputKind::BeastTcpServer => Bound::Listener(TcpListener::bind(input.address).await?),
+        InputKind::Udp => Bound::Udp(bind_udp(input)?),
+    })
+}
+
+/// Binds every input, or says which one cannot be bound and why.
+pub async fn bind_all(inputs: &[InputConfig]) -> Result<Vec<Bound>, String> {
+    let mut bound = Vec::with_capacity(inputs.len());
+    for (i, input) in inputs.iter().enumerate() {
+        let b = bind(input).await.map_err(|e| {
+            format!("input {} ({}) cannot bind {}: {e}", i + 1, input.kind.name(), input.address)
+        })?;
+        bound.push(b);
+    }
+    Ok(bound)
+}
+
+/// Spawns the task of one input on its bound socket.
+pub fn spawn(
+    input: InputConfig,
+    bound: Bound,
+    tx: SyncSender<ToCore>,
+    reg: Arc<Registry>,
+) -> tokio::task::JoinHandle<()> {
     tokio::spawn(async move {
-        let r = match input.kind {
-            InputKind::BeastTcpClient => tcp_client(&input, &tx, &reg).await,
-            InputKind::BeastTcpServer => tcp_server(&input, tx, reg.clone()).await,
-            InputKind::Udp => udp(&input, &tx, &reg).await,
+        let r = match bound {
+            Bound::Client => tcp_client(&input, &tx, &reg).await,
+            Bound::Listener(l) => tcp_server(&input, l, tx, reg.clone()).await,
+            Bound::Udp(sock) => udp(&input, sock, &tx, &reg).await,
         };
         if let Err(e) = r {
             tracing::error!(address = %input.address, "input stopped: {e}");
@@ -264,8 +299,12 @@ async fn tcp_client(input: &InputConfig, tx: &SyncSender<ToCore>, reg: &Registry
     }
 }
 
-async fn tcp_server(input: &InputConfig, tx: SyncSender<ToCore>, reg: Arc<Registry>) -> std::io::Result<()> {
-    let listener = TcpListener::bind(input.address).await?;
+async fn tcp_server(
+    input: &InputConfig,
+    listener: TcpListener,
+    tx: SyncSender<ToCore>,
+    reg: Arc<Registry>,
+) -> std::io::Result<()> {
     let fixed = input.receiver.as_deref().and_then(|id| reg.index_of(id));
     let mut in_a_row = 0;
     // Each receiver's newest connection, and how to close it: one
@@ -406,7 +445,7 @@ struct Bucket {
     at: f64,
 }
 
-async fn udp(input: &InputConfig, tx: &SyncSender<ToCore>, reg: &Registry) -> std::io::Result<()> {
+fn bind_udp(input: &InputConfig) -> std::io::Result<UdpSocket> {
     let domain = if input.address.is_ipv4() { Domain::IPV4 } else { Domain::IPV6 };
     let s = Socket::new(domain, Type::DGRAM, Some(Protocol::UDP))?;
     // Bursts of many receivers at once: a large buffer (the kernel caps it).
@@ -419,7 +458,15 @@ async fn udp(input: &InputConfig, tx: &SyncSender<ToCore>, reg: &Registry) -> st
     if let Err(e) = super::stamp::enable(&s) {
         tracing::warn!(input = %input.address, "no kernel receive timestamps ({e}): arrival read from the clock");
     }
-    let sock = UdpSocket::from_std(s.into())?;
+    UdpSocket::from_std(s.into())
+}
+
+async fn udp(
+    input: &InputConfig,
+    sock: UdpSocket,
+    tx: &SyncSender<ToCore>,
+    reg: &Registry,
+) -> std::io::Result<()> {
     let format = if input.format == "avr" { InputFormat::Avr } else { InputFormat::Beast };
     let fixed = input.receiver.as_deref().and_then(|id| reg.index_of(id));
     let mut parsers: HashMap<usize, Box<dyn FrameParser + Send>> = HashMap::new();
@@ -546,7 +593,8 @@ mod tests {
         let (tx, core) = sync_channel(100);
         let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
         rt.block_on(async {
-            let task = spawn(input, tx, reg.clone());
+            let bound = bind(&input).await.unwrap();
+            let task = spawn(input, bound, tx, reg.clone());
             tokio::time::sleep(Duration::from_millis(50)).await;
             let mut id = Vec::new();
             crate::feed::beast::encode_receiver_id(0x0102_0304_0506_0708, &mut id);

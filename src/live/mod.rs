@@ -30,6 +30,7 @@ use crate::config::Config;
 use crate::core::{Back, Cmd, Core, CoreStats, Event, Front};
 use crate::feed::capture::{CaptureWriter, ReceiverDecl};
 use crate::feed::RawFrame;
+use config::InputConfig;
 use inputs::Registry;
 use outputs::Outputs;
 
@@ -166,15 +167,21 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
         ),
     };
     let stats_every = cfg.service.stats_interval_s;
+    // Every port bound before anything runs: one that is taken (another
+    // daemon, a stale instance) fails the start, where systemd shows it.
+    let bound = inputs::bind_all(&cfg.input).await.map_err(anyhow::Error::msg)?;
     let reg = registry.clone();
     let core_thread = std::thread::Builder::new()
         .name("core".into())
         .spawn(move || core_loop(core_cfg, decls, outputs, recorder, rx, reg, stats_every))?;
 
-    let mut tasks: Vec<tokio::task::JoinHandle<()>> =
-        cfg.input.iter().map(|i| inputs::spawn(i.clone(), tx.clone(), registry.clone())).collect();
-    // Give the listeners a moment to bind before saying we are ready.
-    tokio::time::sleep(Duration::from_millis(50)).await;
+    let spawn_all = |list: &[InputConfig], bound: Vec<inputs::Bound>| -> Vec<tokio::task::JoinHandle<()>> {
+        list.iter()
+            .zip(bound)
+            .map(|(i, b)| inputs::spawn(i.clone(), b, tx.clone(), registry.clone()))
+            .collect()
+    };
+    let mut tasks = spawn_all(&cfg.input, bound);
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
     tracing::info!(
         inputs = cfg.input.len(),
@@ -225,7 +232,24 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
                                 t.abort();
                                 let _ = t.await;
                             }
-                            tasks = new.input.iter().map(|i| inputs::spawn(i.clone(), tx.clone(), registry.clone())).collect();
+                            // Each input that binds runs; one that cannot is
+                            // said and left out, the daemon going on with the rest.
+                            let (mut ok, mut bound) = (Vec::new(), Vec::new());
+                            for (n, i) in new.input.iter().enumerate() {
+                                match inputs::bind(i).await {
+                                    Ok(b) => {
+                                        ok.push(i.clone());
+                                        bound.push(b);
+                                    }
+                                    Err(e) => tracing::error!(
+                                        "SIGHUP: input {} ({}) cannot bind {}: {e}; running without it",
+                                        n + 1,
+                                        i.kind.name(),
+                                        i.address
+                                    ),
+                                }
+                            }
+                            tasks = spawn_all(&ok, bound);
                         }
                         current = new;
                     }
