@@ -218,6 +218,12 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
     written?;
     let mut diagnostics = vec![front.mlat().report(last, &|k| front.receiver_id(k).to_string())];
     diagnostics.extend(front.delay_report());
+    let late = front.stats().late_copies;
+    if late > 0 {
+        diagnostics.push(format!(
+            "grouping: {late} late copies (arrived after their transmission was processed: not decoded again)"
+        ));
+    }
     diagnostics.push(format!("tracking: {}", back.fuser().stats()));
     diagnostics.extend(errors.iter().map(|e| format!("fuse1090: skipped {e}")));
     if skipped > errors.len() as u64 {

@@ -206,17 +206,22 @@ impl Front {
             return;
         }
         r.frames += 1;
+        let gps = r.decl.clock == ClockKind::Gps;
         if frame.is_mode_ac() {
             self.stats.mode_ac += 1;
             return;
         }
         self.advance(arrival, cmds);
         let (grouper, mut ctx) = self.ctx();
-        match grouper.add(rx, arrival, frame, &mut |g: &Group| ctx.on_group(g, arrival, cmds)) {
+        match grouper.add(rx, arrival, frame, gps, &mut |g: &Group| ctx.on_group(g, arrival, cmds)) {
             Added::New => {}
             Added::Joined => return,
             Added::Duplicate => {
                 self.stats.duplicates += 1;
+                return;
+            }
+            Added::Late => {
+                self.stats.late_copies += 1;
                 return;
             }
         }

@@ -148,6 +148,9 @@ pub struct CoreStats {
     pub unknown_receiver: u64,
     pub bad_time: u64,
     pub duplicates: u64,
+    /// Copies that arrived after their transmission was processed (a link's
+    /// delay burst): dropped, not decoded again.
+    pub late_copies: u64,
     pub messages: u64,
     pub positions: u64,
     pub fixes: u64,

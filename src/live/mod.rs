@@ -499,7 +499,7 @@ fn stats_line(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outp
     tracing::info!(
         "stats: frames {} [{}], messages {}, aircraft {}, tracks {}, fixes {} ({:.1}/s), suspects {}, conflicts {}, \
          rejected measurements {}, fusion fallbacks {}, unknown senders {}, socket errors {}, queue drops {}, \
-         output errors {}, mlat {} (self-synchronised {})",
+         output errors {}, mlat {} (self-synchronised {}), late copies {}",
         s.frames,
         per_rx.join(" "),
         s.messages,
@@ -517,6 +517,7 @@ fn stats_line(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outp
         out_err,
         front.mlat_fixes,
         front.self_synced_fixes,
+        s.late_copies,
     );
 }
 
@@ -527,6 +528,8 @@ fn metrics(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outputs
     metrics::counter!("fuse1090_messages_total").absolute(s.messages);
     metrics::counter!("fuse1090_mlat_fixes_total").absolute(s.fixes);
     metrics::counter!("fuse1090_mlat_self_synced_fixes_total").absolute(front.self_synced_fixes);
+    // Copies a link delivered after their transmission was processed.
+    metrics::counter!("fuse1090_late_copies_total").absolute(s.late_copies);
     metrics::gauge!("fuse1090_tracks").set(back.fuser().tracks() as f64);
     metrics::counter!("fuse1090_unknown_senders_total").absolute(reg.unknown_senders.load(Ordering::Relaxed));
     metrics::counter!("fuse1090_socket_errors_total").absolute(reg.socket_errors.load(Ordering::Relaxed));

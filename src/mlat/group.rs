@@ -2,15 +2,19 @@
 //! several receivers, collected for a fixed wait after the first copy arrives.
 //!
 //! The grouper also de-duplicates for the decoder: only the first copy of a
-//! transmission is decoded, the later ones join its group. Pending groups are
+//! transmission is decoded, the later ones join its group, and a GPS-timed
+//! copy arriving after its group was handed out is recognised as late
+//! ([`super::late`]) instead of being decoded again. Pending groups are
 //! bounded; what is dropped is counted.
 
 use std::collections::VecDeque;
 
 use smallvec::{smallvec, SmallVec};
 
+use crate::feed::capture::ClockKind;
 use crate::feed::RawFrame;
 
+use super::late::{HandedOut, SAME_TRANSMISSION_S};
 use super::pending::{Groups, PendingIndex};
 
 /// One receiver's copy.
@@ -60,6 +64,9 @@ pub struct Group {
     pub copies: SmallVec<[Copy; 8]>,
     pub frame: RawFrame,
     pub first_arrival: f64,
+    /// Unix time of arrival at its first GPS-timed receiver (s); NaN when
+    /// no copy is GPS-timed.
+    pub gps_t: f64,
     pub info: GroupInfo,
 }
 
@@ -71,6 +78,9 @@ pub struct GroupStats {
     pub duplicate_copies: u64,
     /// Groups dropped because too many were pending.
     pub overflow: u64,
+    /// GPS-timed copies of a transmission whose group had been handed out
+    /// before they arrived: not decoded again, and no group of their own.
+    pub late_copies: u64,
 }
 
 /// What happened to a frame.
@@ -82,6 +92,8 @@ pub enum Added {
     Joined,
     /// Same receiver, same bytes, still pending: dropped.
     Duplicate,
+    /// A copy of a transmission already handed out: dropped.
+    Late,
 }
 
 pub struct Grouper {
@@ -89,6 +101,7 @@ pub struct Grouper {
     max_pending: usize,
     pending: PendingIndex,
     queue: Queue,
+    handed_out: HandedOut,
     stats: GroupStats,
 }
 
@@ -129,6 +142,7 @@ impl Grouper {
             max_pending,
             pending: PendingIndex::new(),
             queue: Queue { groups: VecDeque::new(), base: 0 },
+            handed_out: HandedOut::new(),
             stats: GroupStats::default(),
         }
     }
@@ -137,15 +151,39 @@ impl Grouper {
         &self.stats
     }
 
-    pub fn add(&mut self, rx: usize, arrival: f64, frame: &RawFrame, done: &mut impl FnMut(&Group)) -> Added {
+    /// One receiver's copy; `gps` says whether the receiver's timestamps
+    /// are GPS time.
+    pub fn add(
+        &mut self,
+        rx: usize,
+        arrival: f64,
+        frame: &RawFrame,
+        gps: bool,
+        done: &mut impl FnMut(&Group),
+    ) -> Added {
         self.stats.copies += 1;
         let copy = Copy { rx, timestamp: frame.timestamp, arrival, signal: frame.signal };
         let k = frame.key();
+        // Worked out only where a GPS time is compared or kept.
+        let gps_t = || (gps && frame.has_timing()).then(|| ClockKind::gps_unix(frame.timestamp, arrival));
         if let Some(seq) = self.pending.find(k, &self.queue) {
             let i = self.queue.offset(seq);
             let g = &mut self.queue.groups[i];
             match g.copies.iter().find(|c| c.rx == rx) {
                 None => {
+                    let t = gps_t();
+                    // Its GPS time far from the group's: a late copy of an
+                    // earlier transmission of the same bytes (a steady
+                    // velocity message, say), not a copy of this one.
+                    if t.is_some_and(|t| {
+                        (t - g.gps_t).abs() > SAME_TRANSMISSION_S && self.handed_out.holds(k, t)
+                    }) {
+                        self.stats.late_copies += 1;
+                        return Added::Late;
+                    }
+                    if g.gps_t.is_nan() {
+                        g.gps_t = t.unwrap_or(f64::NAN);
+                    }
                     g.copies.push(copy);
                     return Added::Joined;
                 }
@@ -159,6 +197,15 @@ impl Grouper {
                 Some(_) => {}
             }
         }
+        let gps_t = gps_t();
+        if let Some(t) = gps_t {
+            // Its group can have been handed out only if it arrived the
+            // wait after the transmission at the earliest.
+            if arrival + SAME_TRANSMISSION_S >= t + self.wait_s && self.handed_out.holds(k, t) {
+                self.stats.late_copies += 1;
+                return Added::Late;
+            }
+        }
         if self.queue.groups.len() >= self.max_pending {
             self.stats.overflow += 1;
             self.pop_front(done);
@@ -168,6 +215,7 @@ impl Grouper {
         q.groups.push_back(Group {
             frame: *frame,
             first_arrival: arrival,
+            gps_t: gps_t.unwrap_or(f64::NAN),
             copies: smallvec![copy],
             info: GroupInfo::default(),
         });
@@ -202,6 +250,9 @@ impl Grouper {
     fn pop_front(&mut self, done: &mut impl FnMut(&Group)) {
         if let Some(g) = self.queue.groups.front() {
             done(g);
+            if !g.gps_t.is_nan() {
+                self.handed_out.remember(g.frame.key(), g.gps_t);
+            }
             self.queue.groups.pop_front();
             self.queue.base = self.queue.base.wrapping_add(1);
         }
@@ -226,13 +277,13 @@ mod tests {
         let mut g = Grouper::new(0.2, 100);
         let mut out = Vec::new();
         let a = f("8D4840D6202CC371C32CE0576098");
-        assert_eq!(g.add(0, 10.0, &a, &mut keep(&mut out)), Added::New);
-        assert_eq!(g.add(1, 10.05, &a, &mut keep(&mut out)), Added::Joined);
-        assert_eq!(g.add(1, 10.06, &a, &mut keep(&mut out)), Added::Duplicate);
+        assert_eq!(g.add(0, 10.0, &a, false, &mut keep(&mut out)), Added::New);
+        assert_eq!(g.add(1, 10.05, &a, false, &mut keep(&mut out)), Added::Joined);
+        assert_eq!(g.add(1, 10.06, &a, false, &mut keep(&mut out)), Added::Duplicate);
         // Same bytes from a receiver already in the group, at another time: a new transmission.
         let later = crate::feed::frame_from_hex("8D4840D6202CC371C32CE0576098", 99, 1).unwrap();
-        assert_eq!(g.add(1, 10.07, &later, &mut keep(&mut out)), Added::New);
-        assert_eq!(g.add(2, 10.1, &f("5D4840D61F3A2B"), &mut keep(&mut out)), Added::New);
+        assert_eq!(g.add(1, 10.07, &later, false, &mut keep(&mut out)), Added::New);
+        assert_eq!(g.add(2, 10.1, &f("5D4840D61F3A2B"), false, &mut keep(&mut out)), Added::New);
         g.advance(10.19, &mut keep(&mut out));
         assert!(out.is_empty());
         g.advance(10.2, &mut keep(&mut out));
@@ -240,10 +291,43 @@ mod tests {
         assert_eq!(out[0].copies.len(), 2);
         // The same bytes after the wait are a new transmission.
         g.advance(10.7, &mut keep(&mut out));
-        assert_eq!(g.add(0, 10.7, &a, &mut keep(&mut out)), Added::New);
+        assert_eq!(g.add(0, 10.7, &a, false, &mut keep(&mut out)), Added::New);
         g.flush(&mut keep(&mut out));
         assert_eq!(out.len(), 4);
         assert_eq!(g.stats().duplicate_copies, 1);
+    }
+
+    /// A frame as a GPS-timed receiver heard it at Unix time `t`.
+    fn gps_frame(hex: &str, t: f64) -> RawFrame {
+        crate::feed::frame_from_hex(hex, ClockKind::gps_timestamp(t), 1).unwrap()
+    }
+
+    #[test]
+    fn a_gps_timed_copy_later_than_the_wait_is_late_and_a_repeat_is_new() {
+        let mut g = Grouper::new(0.5, 100);
+        let mut out = Vec::new();
+        let hex = "8D4840D6202CC371C32CE0576098";
+        // Heard at 10.000 s by rx0 and rx1 (GPS), 10.002 s by rx2, whose
+        // link delays it by 0.8 s.
+        assert_eq!(g.add(0, 10.04, &gps_frame(hex, 10.0), true, &mut keep(&mut out)), Added::New);
+        assert_eq!(g.add(1, 10.05, &gps_frame(hex, 10.0005), true, &mut keep(&mut out)), Added::Joined);
+        g.advance(10.6, &mut keep(&mut out));
+        assert_eq!(out.len(), 1);
+        assert_eq!(g.add(2, 10.8, &gps_frame(hex, 10.002), true, &mut keep(&mut out)), Added::Late);
+        // The same bytes sent again 0.5 s later (a steady velocity message):
+        // a transmission of its own, from every receiver.
+        assert_eq!(g.add(2, 10.85, &gps_frame(hex, 10.5), true, &mut keep(&mut out)), Added::New);
+        // rx1's copy of the repeat is late too, but it is not the first
+        // transmission's: it joins the repeat's pending group.
+        assert_eq!(g.add(1, 11.05, &gps_frame(hex, 10.5005), true, &mut keep(&mut out)), Added::Joined);
+        // A late copy of the first transmission that finds the repeat
+        // pending is still late, not a copy of the repeat.
+        assert_eq!(g.add(3, 11.1, &gps_frame(hex, 10.001), true, &mut keep(&mut out)), Added::Late);
+        // A counter-timed receiver's copy has no time to compare: new.
+        g.advance(11.5, &mut keep(&mut out));
+        assert_eq!(g.add(4, 11.6, &f(hex), false, &mut keep(&mut out)), Added::New);
+        assert_eq!(g.stats().late_copies, 2);
+        assert_eq!(g.stats().groups, 3);
     }
 
     #[test]
@@ -251,11 +335,11 @@ mod tests {
         let mut g = Grouper::new(1.0, 2);
         let mut out = Vec::new();
         for (i, hex) in ["5D4840D61F3A2B", "5D4840D61F3A2C", "5D4840D61F3A2D"].iter().enumerate() {
-            g.add(0, i as f64 * 0.01, &f(hex), &mut keep(&mut out));
+            g.add(0, i as f64 * 0.01, &f(hex), false, &mut keep(&mut out));
         }
         assert_eq!(out.len(), 1);
         assert_eq!(g.stats().overflow, 1);
         // The evicted group's key is gone: its bytes start a new group.
-        assert_eq!(g.add(1, 0.05, &f("5D4840D61F3A2B"), &mut keep(&mut out)), Added::New);
+        assert_eq!(g.add(1, 0.05, &f("5D4840D61F3A2B"), false, &mut keep(&mut out)), Added::New);
     }
 }

@@ -1,13 +1,15 @@
 //! Multilateration stage: [`group`]ing copies of one transmission across
-//! receivers, [`clock`] synchronisation of receiver pairs and the network
-//! time base ([`sync`]), the TDOA [`solver`], the [`engine`] that turns
-//! complete groups into fixes, and the region's GNSS-baro difference
-//! ([`baro`]) that turns barometric altitudes into heights.
+//! receivers (late copies of handed-out ones recognised by [`late`]),
+//! [`clock`] synchronisation of receiver pairs and the network time base
+//! ([`sync`]), the TDOA [`solver`], the [`engine`] that turns complete
+//! groups into fixes, and the region's GNSS-baro difference ([`baro`]) that
+//! turns barometric altitudes into heights.
 
 pub mod baro;
 pub mod clock;
 pub mod engine;
 pub mod group;
+mod late;
 mod pending;
 pub mod solver;
 pub mod sync;

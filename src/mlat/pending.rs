@@ -36,17 +36,23 @@ pub(super) trait Groups {
     fn pending(&self) -> impl ExactSizeIterator<Item = (u128, u32)>;
 }
 
+/// A frame key's hash: a folded multiply of its two halves (frame bytes end
+/// in 24 bits of parity, so they are well spread); its high half is the
+/// better mixed.
+pub(super) fn hash(key: u128) -> u64 {
+    let (lo, hi) = (key as u64 ^ 0x243f_6a88_85a3_08d3, (key >> 64) as u64 ^ 0x1319_8a2e_0370_7344);
+    let wide = u128::from(lo) * u128::from(hi);
+    wide as u64 ^ (wide >> 64) as u64
+}
+
 impl PendingIndex {
     pub(super) fn new() -> Self {
         PendingIndex { slots: vec![EMPTY; MIN_SLOTS], filled: 0 }
     }
 
-    /// Home slot and tag of a key: a folded multiply of its two halves
-    /// (frame bytes end in 24 bits of parity, so they are well spread).
+    /// Home slot and tag of a key.
     fn hash(&self, key: u128) -> (usize, u64) {
-        let (lo, hi) = (key as u64 ^ 0x243f_6a88_85a3_08d3, (key >> 64) as u64 ^ 0x1319_8a2e_0370_7344);
-        let wide = u128::from(lo) * u128::from(hi);
-        let h = wide as u64 ^ (wide >> 64) as u64;
+        let h = hash(key);
         let home = (h >> 32) as usize & (self.slots.len() - 1);
         (home, (h | 1) << 32)
     }
