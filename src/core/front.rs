@@ -13,6 +13,7 @@ use crate::FastMap;
 
 use super::back::Cmd;
 use super::delay::DelayCal;
+use super::lateness::Lateness;
 use super::{CoreConfig, CoreStats, Dating, Event, PositionReport};
 use crate::feed::capture::{CaptureRecord, ClockKind, ReceiverDecl};
 use crate::feed::RawFrame;
@@ -34,6 +35,8 @@ struct RxState {
     delay: DelayCal,
     /// Its latest report was dated by arrival (no GPS time to be had).
     arrival_dated: bool,
+    /// Its timestamps on the server's clock: how late a frame arrived.
+    lateness: Lateness,
 }
 
 /// One aircraft's conformance monitor, forgotten when the aircraft is (as
@@ -107,7 +110,13 @@ impl Front {
     pub fn add_receiver(&mut self, decl: ReceiverDecl, cmds: &mut Vec<Cmd>) -> usize {
         self.mlat.add_receiver(&decl);
         cmds.push(Cmd::Receiver(decl.id.clone()));
-        self.receivers.push(RxState { decl, frames: 0, delay: DelayCal::default(), arrival_dated: false });
+        self.receivers.push(RxState {
+            decl,
+            frames: 0,
+            delay: DelayCal::default(),
+            arrival_dated: false,
+            lateness: Lateness::default(),
+        });
         self.receivers.len() - 1
     }
 
@@ -206,14 +215,20 @@ impl Front {
             return;
         }
         r.frames += 1;
-        let gps = r.decl.clock == ClockKind::Gps;
         if frame.is_mode_ac() {
             self.stats.mode_ac += 1;
             return;
         }
+        // A GPS receiver's seconds of the day start again at midnight: its
+        // offset from the server's clock jumps as a restarted counter's does.
+        let emission = if frame.has_timing() {
+            r.lateness.emission(r.decl.clock.seconds(frame.timestamp), arrival)
+        } else {
+            f64::NAN
+        };
         self.advance(arrival, cmds);
         let (grouper, mut ctx) = self.ctx();
-        match grouper.add(rx, arrival, frame, gps, &mut |g: &Group| ctx.on_group(g, arrival, cmds)) {
+        match grouper.add(rx, arrival, frame, emission, &mut |g: &Group| ctx.on_group(g, arrival, cmds)) {
             Added::New => {}
             Added::Joined => return,
             Added::Duplicate => {

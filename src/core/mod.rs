@@ -19,6 +19,7 @@
 pub mod back;
 pub mod delay;
 pub mod front;
+pub mod lateness;
 
 use serde::Deserialize;
 

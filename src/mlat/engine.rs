@@ -804,7 +804,7 @@ mod tests {
         Group {
             frame,
             first_arrival: t + 0.1,
-            gps_t: f64::NAN,
+            emission: f64::NAN,
             copies,
             info: GroupInfo {
                 decoded: true,

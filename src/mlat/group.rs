@@ -2,8 +2,8 @@
 //! several receivers, collected for a fixed wait after the first copy arrives.
 //!
 //! The grouper also de-duplicates for the decoder: only the first copy of a
-//! transmission is decoded, the later ones join its group, and a GPS-timed
-//! copy arriving after its group was handed out is recognised as late
+//! transmission is decoded, the later ones join its group, and a copy
+//! arriving after its group was handed out is recognised as late
 //! ([`super::late`]) instead of being decoded again. Pending groups are
 //! bounded; what is dropped is counted.
 
@@ -11,7 +11,6 @@ use std::collections::VecDeque;
 
 use smallvec::{smallvec, SmallVec};
 
-use crate::feed::capture::ClockKind;
 use crate::feed::RawFrame;
 
 use super::late::{HandedOut, SAME_TRANSMISSION_S};
@@ -64,9 +63,9 @@ pub struct Group {
     pub copies: SmallVec<[Copy; 8]>,
     pub frame: RawFrame,
     pub first_arrival: f64,
-    /// Unix time of arrival at its first GPS-timed receiver (s); NaN when
-    /// no copy is GPS-timed.
-    pub gps_t: f64,
+    /// When it was sent, on the server's clock (Unix s, from its first copy
+    /// that says; NaN when none does).
+    pub emission: f64,
     pub info: GroupInfo,
 }
 
@@ -78,8 +77,8 @@ pub struct GroupStats {
     pub duplicate_copies: u64,
     /// Groups dropped because too many were pending.
     pub overflow: u64,
-    /// GPS-timed copies of a transmission whose group had been handed out
-    /// before they arrived: not decoded again, and no group of their own.
+    /// Copies of a transmission whose group had been handed out before they
+    /// arrived: not decoded again, and no group of their own.
     pub late_copies: u64,
 }
 
@@ -151,38 +150,35 @@ impl Grouper {
         &self.stats
     }
 
-    /// One receiver's copy; `gps` says whether the receiver's timestamps
-    /// are GPS time.
+    /// One receiver's copy, sent at `emission` on the server's clock (Unix s;
+    /// NaN if its receiver cannot say).
     pub fn add(
         &mut self,
         rx: usize,
         arrival: f64,
         frame: &RawFrame,
-        gps: bool,
+        emission: f64,
         done: &mut impl FnMut(&Group),
     ) -> Added {
         self.stats.copies += 1;
         let copy = Copy { rx, timestamp: frame.timestamp, arrival, signal: frame.signal };
         let k = frame.key();
-        // Worked out only where a GPS time is compared or kept.
-        let gps_t = || (gps && frame.has_timing()).then(|| ClockKind::gps_unix(frame.timestamp, arrival));
         if let Some(seq) = self.pending.find(k, &self.queue) {
             let i = self.queue.offset(seq);
             let g = &mut self.queue.groups[i];
             match g.copies.iter().find(|c| c.rx == rx) {
                 None => {
-                    let t = gps_t();
-                    // Its GPS time far from the group's: a late copy of an
+                    // Sent long before the group's: a late copy of an
                     // earlier transmission of the same bytes (a steady
                     // velocity message, say), not a copy of this one.
-                    if t.is_some_and(|t| {
-                        (t - g.gps_t).abs() > SAME_TRANSMISSION_S && self.handed_out.holds(k, t)
-                    }) {
+                    if (emission - g.emission).abs() > SAME_TRANSMISSION_S
+                        && self.handed_out.holds(k, emission)
+                    {
                         self.stats.late_copies += 1;
                         return Added::Late;
                     }
-                    if g.gps_t.is_nan() {
-                        g.gps_t = t.unwrap_or(f64::NAN);
+                    if g.emission.is_nan() {
+                        g.emission = emission;
                     }
                     g.copies.push(copy);
                     return Added::Joined;
@@ -197,14 +193,11 @@ impl Grouper {
                 Some(_) => {}
             }
         }
-        let gps_t = gps_t();
-        if let Some(t) = gps_t {
-            // Its group can have been handed out only if it arrived the
-            // wait after the transmission at the earliest.
-            if arrival + SAME_TRANSMISSION_S >= t + self.wait_s && self.handed_out.holds(k, t) {
-                self.stats.late_copies += 1;
-                return Added::Late;
-            }
+        // Its transmission's group can have been handed out only if it
+        // arrived the wait after being sent at the earliest (NaN: never).
+        if arrival + SAME_TRANSMISSION_S >= emission + self.wait_s && self.handed_out.holds(k, emission) {
+            self.stats.late_copies += 1;
+            return Added::Late;
         }
         if self.queue.groups.len() >= self.max_pending {
             self.stats.overflow += 1;
@@ -215,7 +208,7 @@ impl Grouper {
         q.groups.push_back(Group {
             frame: *frame,
             first_arrival: arrival,
-            gps_t: gps_t.unwrap_or(f64::NAN),
+            emission,
             copies: smallvec![copy],
             info: GroupInfo::default(),
         });
@@ -250,8 +243,8 @@ impl Grouper {
     fn pop_front(&mut self, done: &mut impl FnMut(&Group)) {
         if let Some(g) = self.queue.groups.front() {
             done(g);
-            if !g.gps_t.is_nan() {
-                self.handed_out.remember(g.frame.key(), g.gps_t);
+            if !g.emission.is_nan() {
+                self.handed_out.remember(g.frame.key(), g.emission);
             }
             self.queue.groups.pop_front();
             self.queue.base = self.queue.base.wrapping_add(1);
@@ -277,13 +270,13 @@ mod tests {
         let mut g = Grouper::new(0.2, 100);
         let mut out = Vec::new();
         let a = f("8D4840D6202CC371C32CE0576098");
-        assert_eq!(g.add(0, 10.0, &a, false, &mut keep(&mut out)), Added::New);
-        assert_eq!(g.add(1, 10.05, &a, false, &mut keep(&mut out)), Added::Joined);
-        assert_eq!(g.add(1, 10.06, &a, false, &mut keep(&mut out)), Added::Duplicate);
+        assert_eq!(g.add(0, 10.0, &a, f64::NAN, &mut keep(&mut out)), Added::New);
+        assert_eq!(g.add(1, 10.05, &a, f64::NAN, &mut keep(&mut out)), Added::Joined);
+        assert_eq!(g.add(1, 10.06, &a, f64::NAN, &mut keep(&mut out)), Added::Duplicate);
         // Same bytes from a receiver already in the group, at another time: a new transmission.
         let later = crate::feed::frame_from_hex("8D4840D6202CC371C32CE0576098", 99, 1).unwrap();
-        assert_eq!(g.add(1, 10.07, &later, false, &mut keep(&mut out)), Added::New);
-        assert_eq!(g.add(2, 10.1, &f("5D4840D61F3A2B"), false, &mut keep(&mut out)), Added::New);
+        assert_eq!(g.add(1, 10.07, &later, f64::NAN, &mut keep(&mut out)), Added::New);
+        assert_eq!(g.add(2, 10.1, &f("5D4840D61F3A2B"), f64::NAN, &mut keep(&mut out)), Added::New);
         g.advance(10.19, &mut keep(&mut out));
         assert!(out.is_empty());
         g.advance(10.2, &mut keep(&mut out));
@@ -291,41 +284,37 @@ mod tests {
         assert_eq!(out[0].copies.len(), 2);
         // The same bytes after the wait are a new transmission.
         g.advance(10.7, &mut keep(&mut out));
-        assert_eq!(g.add(0, 10.7, &a, false, &mut keep(&mut out)), Added::New);
+        assert_eq!(g.add(0, 10.7, &a, f64::NAN, &mut keep(&mut out)), Added::New);
         g.flush(&mut keep(&mut out));
         assert_eq!(out.len(), 4);
         assert_eq!(g.stats().duplicate_copies, 1);
     }
 
-    /// A frame as a GPS-timed receiver heard it at Unix time `t`.
-    fn gps_frame(hex: &str, t: f64) -> RawFrame {
-        crate::feed::frame_from_hex(hex, ClockKind::gps_timestamp(t), 1).unwrap()
-    }
-
     #[test]
-    fn a_gps_timed_copy_later_than_the_wait_is_late_and_a_repeat_is_new() {
+    fn a_copy_later_than_the_wait_is_late_and_a_repeat_is_new() {
         let mut g = Grouper::new(0.5, 100);
         let mut out = Vec::new();
-        let hex = "8D4840D6202CC371C32CE0576098";
-        // Heard at 10.000 s by rx0 and rx1 (GPS), 10.002 s by rx2, whose
-        // link delays it by 0.8 s.
-        assert_eq!(g.add(0, 10.04, &gps_frame(hex, 10.0), true, &mut keep(&mut out)), Added::New);
-        assert_eq!(g.add(1, 10.05, &gps_frame(hex, 10.0005), true, &mut keep(&mut out)), Added::Joined);
+        let a = f("8D4840D6202CC371C32CE0576098");
+        // Sent at 10.00 s (on the server's clock, as each copy's receiver
+        // puts it there): rx0 and rx1 on time, rx2 0.8 s late (its link's
+        // burst), over a link whose least delay is 60 ms longer.
+        assert_eq!(g.add(0, 10.04, &a, 10.0, &mut keep(&mut out)), Added::New);
+        assert_eq!(g.add(1, 10.05, &a, 10.01, &mut keep(&mut out)), Added::Joined);
         g.advance(10.6, &mut keep(&mut out));
         assert_eq!(out.len(), 1);
-        assert_eq!(g.add(2, 10.8, &gps_frame(hex, 10.002), true, &mut keep(&mut out)), Added::Late);
+        assert_eq!(g.add(2, 10.9, &a, 10.06, &mut keep(&mut out)), Added::Late);
         // The same bytes sent again 0.5 s later (a steady velocity message):
         // a transmission of its own, from every receiver.
-        assert_eq!(g.add(2, 10.85, &gps_frame(hex, 10.5), true, &mut keep(&mut out)), Added::New);
+        assert_eq!(g.add(2, 10.95, &a, 10.5, &mut keep(&mut out)), Added::New);
         // rx1's copy of the repeat is late too, but it is not the first
         // transmission's: it joins the repeat's pending group.
-        assert_eq!(g.add(1, 11.05, &gps_frame(hex, 10.5005), true, &mut keep(&mut out)), Added::Joined);
+        assert_eq!(g.add(1, 11.05, &a, 10.51, &mut keep(&mut out)), Added::Joined);
         // A late copy of the first transmission that finds the repeat
         // pending is still late, not a copy of the repeat.
-        assert_eq!(g.add(3, 11.1, &gps_frame(hex, 10.001), true, &mut keep(&mut out)), Added::Late);
-        // A counter-timed receiver's copy has no time to compare: new.
+        assert_eq!(g.add(3, 11.1, &a, 10.02, &mut keep(&mut out)), Added::Late);
+        // A copy whose receiver cannot say when it was sent: new.
         g.advance(11.5, &mut keep(&mut out));
-        assert_eq!(g.add(4, 11.6, &f(hex), false, &mut keep(&mut out)), Added::New);
+        assert_eq!(g.add(4, 11.6, &a, f64::NAN, &mut keep(&mut out)), Added::New);
         assert_eq!(g.stats().late_copies, 2);
         assert_eq!(g.stats().groups, 3);
     }
@@ -335,11 +324,11 @@ mod tests {
         let mut g = Grouper::new(1.0, 2);
         let mut out = Vec::new();
         for (i, hex) in ["5D4840D61F3A2B", "5D4840D61F3A2C", "5D4840D61F3A2D"].iter().enumerate() {
-            g.add(0, i as f64 * 0.01, &f(hex), false, &mut keep(&mut out));
+            g.add(0, i as f64 * 0.01, &f(hex), f64::NAN, &mut keep(&mut out));
         }
         assert_eq!(out.len(), 1);
         assert_eq!(g.stats().overflow, 1);
         // The evicted group's key is gone: its bytes start a new group.
-        assert_eq!(g.add(1, 0.05, &f("5D4840D61F3A2B"), false, &mut keep(&mut out)), Added::New);
+        assert_eq!(g.add(1, 0.05, &f("5D4840D61F3A2B"), f64::NAN, &mut keep(&mut out)), Added::New);
     }
 }
