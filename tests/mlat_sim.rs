@@ -128,18 +128,25 @@ fn row_error(truth: &Truth, f: &fuse1090::mlat::MlatFix) -> [f64; 2] {
     en(p.0, p.1, f.lat, f.lon)
 }
 
+/// tma-busy's receivers (rx05 declared 300 m off), none restarting, with
+/// fewer aircraft for a shorter time.
+fn tma_busy_cut(duration_s: f64, aircraft: usize, mode_s_only: usize, spoofers: usize) -> Scenario {
+    let mut s = Scenario::load(&root().join("fixtures/scenarios/tma-busy.toml")).unwrap();
+    s.duration_s = duration_s;
+    let t = &mut s.traffic[0];
+    (t.count, t.mode_s_only, t.spoofers) = (aircraft, mode_s_only, spoofers);
+    for r in &mut s.receiver {
+        r.resets_s.clear();
+    }
+    s
+}
+
 #[test]
 fn a_misplaced_receiver_is_excluded_and_a_restart_does_not_break_mlat() {
-    // tma-busy's receivers, shortened: 40 aircraft for 150 s; rx05 is declared
-    // 300 m off, rx08 restarts at 60 s.
-    let mut s = Scenario::load(&root().join("fixtures/scenarios/tma-busy.toml")).unwrap();
-    s.duration_s = 150.0;
-    s.traffic[0].count = 40;
-    s.traffic[0].mode_s_only = 10;
-    // Two spoofers (2 km and 300 m off): the last two aircraft.
-    s.traffic[0].spoofers = 2;
+    // 40 aircraft for 150 s, two of them spoofers (2 km and 300 m off: the
+    // last two); rx08 restarts at 60 s.
+    let mut s = tma_busy_cut(150.0, 40, 10, 2);
     for r in &mut s.receiver {
-        r.resets_s.retain(|_| false);
         r.burst_per_min = 0.0;
     }
     s.receiver[7].resets_s = vec![60.0];
@@ -217,14 +224,7 @@ fn a_misplaced_receiver_is_excluded_and_a_restart_does_not_break_mlat() {
 /// took twice.
 #[test]
 fn late_copies_of_a_delayed_link_are_not_decoded_again() {
-    let mut s = Scenario::load(&root().join("fixtures/scenarios/tma-busy.toml")).unwrap();
-    s.duration_s = 120.0;
-    s.traffic[0].count = 30;
-    s.traffic[0].mode_s_only = 5;
-    s.traffic[0].spoofers = 0;
-    for r in &mut s.receiver {
-        r.resets_s.clear();
-    }
+    let mut s = tma_busy_cut(120.0, 30, 5, 0);
     for (id, clock) in [("rx10", ClockKind::Gps), ("rx11", ClockKind::Beast12)] {
         let r = s.receiver.iter_mut().find(|r| r.id == id).unwrap();
         assert_eq!(r.clock, clock);
