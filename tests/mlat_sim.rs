@@ -251,6 +251,9 @@ fn late_copies_of_a_delayed_link_are_not_decoded_again() {
         heard.len()
     );
     assert!(late > 5000, "the bursts deliver late copies: {late}");
+    let mut by_rx: Vec<&str> = core.late_copies().iter().map(|&(id, _)| id).collect();
+    by_rx.sort();
+    assert_eq!(by_rx, ["rx10", "rx11"], "only the bursty links deliver late copies");
     assert!(reports <= heard.len(), "a transmission reported twice: {reports} of {}", heard.len());
     // Nothing lost with them: only the first positions of each aircraft
     // (waiting for a CPR pair) go unreported.

@@ -218,10 +218,13 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
     written?;
     let mut diagnostics = vec![front.mlat().report(last, &|k| front.receiver_id(k).to_string())];
     diagnostics.extend(front.delay_report());
-    let late = front.stats().late_copies;
-    if late > 0 {
+    let late = front.late_copies();
+    if !late.is_empty() {
+        let by_rx: Vec<String> = late.iter().take(6).map(|(id, n)| format!("{id} {n}")).collect();
         diagnostics.push(format!(
-            "grouping: {late} late copies (arrived after their transmission was processed: not decoded again)"
+            "grouping: {} late copies (arrived after their transmission was processed: not decoded again): {}",
+            front.stats().late_copies,
+            by_rx.join(", ")
         ));
     }
     diagnostics.push(format!("tracking: {}", back.fuser().stats()));

@@ -37,6 +37,8 @@ struct RxState {
     arrival_dated: bool,
     /// Its timestamps on the server's clock: how late a frame arrived.
     lateness: Lateness,
+    /// Its copies that came after their transmission was processed.
+    late_copies: u64,
 }
 
 /// One aircraft's conformance monitor, forgotten when the aircraft is (as
@@ -116,6 +118,7 @@ impl Front {
             delay: DelayCal::default(),
             arrival_dated: false,
             lateness: Lateness::default(),
+            late_copies: 0,
         });
         self.receivers.len() - 1
     }
@@ -237,6 +240,7 @@ impl Front {
             }
             Added::Late => {
                 self.stats.late_copies += 1;
+                self.receivers[rx].late_copies += 1;
                 return;
             }
         }
@@ -326,6 +330,19 @@ impl Front {
     /// (id, mean, spread) of each network delay learnt (s).
     pub fn learnt_delays(&self) -> impl Iterator<Item = (&str, f64, f64)> {
         self.learnt().map(|(r, m, s)| (r.decl.id.as_str(), m, s))
+    }
+
+    /// (id, count) of each receiver that delivered late copies, the most
+    /// first: the links with delay bursts.
+    pub fn late_copies(&self) -> Vec<(&str, u64)> {
+        let mut late: Vec<(&str, u64)> = self
+            .receivers
+            .iter()
+            .filter(|r| r.late_copies > 0)
+            .map(|r| (r.decl.id.as_str(), r.late_copies))
+            .collect();
+        late.sort_by_key(|&(_, n)| std::cmp::Reverse(n));
+        late
     }
 
     /// The receivers whose network delay is learnt, with its mean and spread (s).

@@ -228,6 +228,11 @@ impl Core {
         self.front.stats()
     }
 
+    /// (id, count) of each receiver that delivered late copies, the most first.
+    pub fn late_copies(&self) -> Vec<(&str, u64)> {
+        self.front.late_copies()
+    }
+
     pub fn decoder(&self) -> &Decoder {
         self.front.decoder()
     }

@@ -391,6 +391,10 @@ fn core_loop(
         if now >= next_delay_metrics {
             next_delay_metrics = now + 1.0;
             delay_metrics(&front, &mut announced);
+            for (id, n) in front.late_copies() {
+                metrics::counter!("fuse1090_receiver_late_copies_total", "receiver" => id.to_string())
+                    .absolute(n);
+            }
         }
         // The next batch's buffer at this one's size: grown from empty, every
         // batch reallocated it several times (malloc and free were 6% of this
