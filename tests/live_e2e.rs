@@ -98,6 +98,22 @@ fn wait_for_log(log: &Path, needle: &str) {
     }
 }
 
+/// The daemon's exit status once it has exited, if it does within `limit`
+/// (still running then: killed, and `None`).
+fn exit_within(child: &mut Child, limit: Duration) -> Option<std::process::ExitStatus> {
+    let t0 = Instant::now();
+    loop {
+        if let Some(st) = child.try_wait().unwrap() {
+            return Some(st);
+        }
+        if t0.elapsed() > limit {
+            child.kill().unwrap();
+            return None;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
 /// Waits up to 5 s for the daemon to close its end of `sock`.
 fn closed_by_the_daemon(sock: &mut TcpStream) -> Result<(), String> {
     sock.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
@@ -316,14 +332,7 @@ fn daemon_end_to_end_over_loopback_with_faults() {
 
     // SIGTERM: gone within two seconds, cleanly.
     signal(&daemon, "TERM");
-    let t0 = Instant::now();
-    let status = loop {
-        if let Some(s) = daemon.try_wait().unwrap() {
-            break s;
-        }
-        assert!(t0.elapsed() < Duration::from_secs(2), "still running 2 s after SIGTERM");
-        std::thread::sleep(Duration::from_millis(20));
-    };
+    let status = exit_within(&mut daemon, Duration::from_secs(2)).expect("still running 2 s after SIGTERM");
     assert!(status.success(), "{status}");
     let mut log = String::new();
     std::fs::File::open(w.dir.path().join("daemon.log")).unwrap().read_to_string(&mut log).unwrap();
@@ -528,18 +537,9 @@ fn a_udp_port_taken_by_another_daemon_fails_its_start_and_sighup_goes_on_without
     let cfg_b = dir.join("b.toml");
     std::fs::write(&cfg_b, cfg("")).unwrap();
     let mut b = daemon(&cfg_b, &log_b, None);
-    let t0 = Instant::now();
-    let st = loop {
-        if let Some(st) = b.try_wait().unwrap() {
-            break st;
-        }
-        if t0.elapsed() > Duration::from_secs(10) {
-            b.kill().unwrap();
-            panic!("B still running on a taken port: {}", std::fs::read_to_string(&log_b).unwrap());
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    };
+    let st = exit_within(&mut b, Duration::from_secs(10));
     let said = std::fs::read_to_string(&log_b).unwrap();
+    let st = st.unwrap_or_else(|| panic!("B still running on a taken port: {said}"));
     assert!(!st.success(), "{said}");
     assert!(said.contains(&format!("input 1 (udp) cannot bind 127.0.0.1:{port}")), "{said}");
     assert!(!said.contains("running inputs="), "{said}");
