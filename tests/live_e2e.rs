@@ -222,8 +222,8 @@ fn python() -> Option<PathBuf> {
             return Some(p);
         }
     }
-    eprintln!(
-        "SKIP: no Python with asterix_decoder (.ci/run installs it in .venv); ASTERIX not cross-checked"
+    common::skipped(
+        "no Python with asterix_decoder (.ci/run installs it in .venv); ASTERIX not cross-checked",
     );
     None
 }

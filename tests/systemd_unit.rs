@@ -67,7 +67,7 @@ impl Filter {
     /// The unit's, or `None` (saying so) where `systemd-analyze` is missing.
     fn of_unit() -> Option<Filter> {
         let Some(groups) = groups() else {
-            eprintln!("SKIP: systemd-analyze not available; the unit's filter not checked");
+            common::skipped("systemd-analyze not available; the unit's filter not checked");
             return None;
         };
         let unit = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/systemd/fuse1090.service"))
@@ -115,7 +115,7 @@ fn the_units_syscall_filter_allows_what_the_service_calls() {
 fn the_daemon_makes_no_call_the_units_filter_refuses() {
     let Some(filter) = Filter::of_unit() else { return };
     if Command::new("strace").arg("-V").output().map_or(true, |o| !o.status.success()) {
-        eprintln!("SKIP: strace not available; the daemon's calls not checked");
+        common::skipped("strace not available; the daemon's calls not checked");
         return;
     }
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));

@@ -78,6 +78,16 @@ impl ClockKind {
         }
         ((secs % 86_400) << 30) | ns
     }
+
+    /// A GPS timestamp moved by a whole number of nanoseconds, wrapping at
+    /// midnight. Integer arithmetic throughout: a Unix time in `f64`
+    /// resolves only about 240 ns today, far coarser than the timestamps.
+    pub fn gps_shift(ts: u64, shift_ns: i64) -> u64 {
+        const DAY_NS: i64 = 86_400 * 1_000_000_000;
+        let of_day = (ts >> 30) as i64 * 1_000_000_000 + (ts & 0x3FFF_FFFF) as i64;
+        let moved = (of_day + shift_ns.rem_euclid(DAY_NS)).rem_euclid(DAY_NS);
+        (((moved / 1_000_000_000) as u64) << 30) | (moved % 1_000_000_000) as u64
+    }
 }
 
 impl std::str::FromStr for ClockKind {
@@ -658,6 +668,32 @@ mod tests {
             assert!(reasons[3].contains("declared twice"));
             assert!(reasons[4].starts_with("mem.txt:9:") && reasons[4].contains("valid lat"), "{reasons:?}");
         }
+    }
+
+    #[test]
+    fn gps_shift_is_exact_to_the_nanosecond() {
+        let gps = |s: u64, ns: u64| (s << 30) | ns;
+        // Differences between shifted timestamps are the originals' exactly,
+        // including across midnight either way and for shifts of decades.
+        let stamps = [gps(3_600, 123_456_789), gps(3_600, 123_456_790), gps(86_399, 999_999_999), gps(0, 1)];
+        for shift in [0i64, 1, -1, 1_764_000_000_123_456_789, -86_400_000_000_001, 86_399_999_999_999] {
+            for &a in &stamps {
+                let moved = ClockKind::gps_shift(a, shift);
+                assert!(moved & 0x3FFF_FFFF < 1_000_000_000);
+                assert!(moved >> 30 < 86_400);
+                let back = ClockKind::gps_shift(moved, -shift);
+                assert_eq!(back, a, "shift {shift} of {a:#x}");
+                for &b in &stamps {
+                    let ns = |t: u64| (t >> 30) as i64 * 1_000_000_000 + (t & 0x3FFF_FFFF) as i64;
+                    let day = 86_400_000_000_000i64;
+                    let before = (ns(b) - ns(a)).rem_euclid(day);
+                    let after = (ns(ClockKind::gps_shift(b, shift)) - ns(moved)).rem_euclid(day);
+                    assert_eq!(before, after, "shift {shift}");
+                }
+            }
+        }
+        assert_eq!(ClockKind::gps_shift(gps(86_399, 999_999_999), 1), gps(0, 0));
+        assert_eq!(ClockKind::gps_shift(gps(0, 0), -1), gps(86_399, 999_999_999));
     }
 
     #[test]

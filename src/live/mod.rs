@@ -597,7 +597,13 @@ mod tests {
                 assert_eq!(child, libc::SCHED_RR, "a thread started afterwards is time-shared");
             }
             Err(e) => {
-                eprintln!("SKIP: realtime scheduling not permitted here ({e})");
+                let why = format!("realtime scheduling not permitted here ({e}); only the refusal checked");
+                eprintln!("SKIP: {why}");
+                if let Ok(log) = std::env::var("FUSE1090_SKIP_LOG") {
+                    use std::io::Write;
+                    let f = std::fs::OpenOptions::new().create(true).append(true).open(log);
+                    let _ = f.and_then(|mut f| f.write_all(format!("live::realtime: {why}\n").as_bytes()));
+                }
                 assert_eq!(e.kind(), std::io::ErrorKind::PermissionDenied, "{e}");
                 assert_eq!(policy(), libc::SCHED_OTHER);
             }

@@ -71,7 +71,9 @@ pub async fn replay(capture: &Path, cfg: &Config, speed: f64) -> Result<u64> {
         bail!("{}: no frames", capture.display());
     }
     let start = unix_now() + 0.2;
-    let shift = start - first;
+    // GPS timestamps move by a whole number of nanoseconds (see
+    // `ClockKind::gps_shift`); the schedule itself needs no such care.
+    let shift_ns = ((start - first) * 1e9).round() as i64;
     let mut tasks = Vec::new();
     for (rx, frames) in per_rx {
         let decl = &decls[rx];
@@ -85,7 +87,7 @@ pub async fn replay(capture: &Path, cfg: &Config, speed: f64) -> Result<u64> {
         let gps = decl.clock == ClockKind::Gps;
         let id = decl.id.clone();
         tasks.push(tokio::spawn(async move {
-            let r = play(route, frames, gps, start, first, shift, speed).await;
+            let r = play(route, frames, gps, start, first, shift_ns, speed).await;
             if let Err(e) = &r {
                 tracing::error!(receiver = id, "replay: {e:#}");
             }
@@ -110,7 +112,7 @@ async fn play(
     gps: bool,
     start: f64,
     first: f64,
-    shift: f64,
+    shift_ns: i64,
     speed: f64,
 ) -> Result<u64> {
     let mut sink = match route {
@@ -157,9 +159,9 @@ async fn play(
         let now = unix_now();
         buf.clear();
         while i < frames.len() && start + (frames[i].0 - first) / speed <= now {
-            let (arrival, mut f) = frames[i];
+            let mut f = frames[i].1;
             if gps && f.has_timing() {
-                f.timestamp = ClockKind::gps_timestamp(ClockKind::gps_unix(f.timestamp, arrival) + shift);
+                f.timestamp = ClockKind::gps_shift(f.timestamp, shift_ns);
             }
             beast::encode(&f, &mut buf);
             i += 1;
@@ -179,4 +181,68 @@ async fn play(
         let _ = s.shutdown().await;
     }
     Ok(sent)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tokio::io::AsyncReadExt;
+
+    /// Frames of a GPS-timed receiver recorded in 2020, replayed today over
+    /// a real socket: every timestamp moves by one and the same whole number
+    /// of nanoseconds, so the differences between them (what
+    /// multilateration uses) are exact. Through `f64` Unix seconds they were
+    /// off by up to about 120 ns.
+    #[test]
+    fn replayed_gps_timestamps_keep_their_differences_to_the_nanosecond() {
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let port = listener.local_addr().unwrap().port();
+        let cfg = Config::parse(
+            &format!(
+                "[[receiver]]\nid = \"g\"\nlat = 49.0\nlon = 2.5\nalt_m = 100.0\nclock = \"gps\"\n\
+                 source = \"127.0.0.1\"\n[[input]]\nkind = \"beast_tcp_server\"\naddress = \"127.0.0.1:{port}\"\n"
+            ),
+            "test",
+        )
+        .unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let capture = dir.path().join("c.txt");
+        let gps = |s: u64, ns: u64| (s << 30) | ns;
+        // Nanoseconds that no f64 Unix time of today holds.
+        let stamps = [gps(43_200, 123_456_789), gps(43_200, 123_456_790), gps(43_200, 987_654_321)];
+        let decl = cfg.receiver[0].decl();
+        let mut w = crate::feed::capture::CaptureWriter::new(Vec::new(), "test").unwrap();
+        w.receiver(&decl).unwrap();
+        for (k, ts) in stamps.iter().enumerate() {
+            let arrival = 1_590_969_600.0 + 43_200.0 + 0.2 + k as f64 * 0.01;
+            w.frame(arrival, 0, &RawFrame::new(&[0x20, 0, 0, 0, 0, 0, 0], *ts, 0).unwrap()).unwrap();
+        }
+        std::fs::write(&capture, w.into_inner()).unwrap();
+        let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+        let received = rt.block_on(async {
+            listener.set_nonblocking(true).unwrap();
+            let l = TcpListener::from_std(listener).unwrap();
+            let server = tokio::spawn(async move {
+                let (mut s, _) = l.accept().await.unwrap();
+                let mut bytes = Vec::new();
+                s.read_to_end(&mut bytes).await.unwrap();
+                bytes
+            });
+            assert_eq!(replay(&capture, &cfg, 50.0).await.unwrap(), 3);
+            server.await.unwrap()
+        });
+        let mut got = Vec::new();
+        let mut parser = crate::feed::parser_for(crate::feed::InputFormat::Beast);
+        parser.push(&received, &mut |ev| {
+            if let crate::feed::FeedEvent::Frame(f) = ev {
+                got.push(f.timestamp)
+            }
+        });
+        assert_eq!(got.len(), 3);
+        let ns = |t: u64| (t >> 30) as i64 * 1_000_000_000 + (t & 0x3FFF_FFFF) as i64;
+        for (a, b) in stamps.iter().zip(&got) {
+            assert_eq!(ns(*b) - ns(got[0]), ns(*a) - ns(stamps[0]), "{got:x?}");
+        }
+        assert_ne!(got[0], stamps[0], "moved to today");
+    }
 }
