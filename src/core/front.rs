@@ -332,6 +332,12 @@ impl Front {
         self.learnt().map(|(r, m, s)| (r.decl.id.as_str(), m, s))
     }
 
+    /// (id, MLAT health) of every receiver: whether it is excluded from
+    /// fixes now, how often it was, its recent sync outlier rate.
+    pub fn mlat_health(&self) -> impl Iterator<Item = (&str, &crate::mlat::sync::RxHealth)> {
+        self.receivers.iter().zip(&self.mlat.sync.health).map(|(r, h)| (r.decl.id.as_str(), h))
+    }
+
     /// (id, count) of each receiver that delivered late copies, the most
     /// first: the links with delay bursts.
     pub fn late_copies(&self) -> Vec<(&str, u64)> {

@@ -27,11 +27,16 @@ use socket2::{Domain, Protocol, Socket, Type};
 use tokio::io::Interest;
 use tokio::net::{TcpListener, TcpStream, UdpSocket};
 
+use super::admit::{Admission, Refusal};
 use super::config::{BeastId, InputConfig, InputKind, ReceiverConfig};
 use super::ToCore;
 use crate::feed::{parser_for, FeedEvent, FrameParser, InputFormat, RawFrame};
 
-/// Per-receiver counters, shared with the stats line and the metrics.
+/// Per-receiver counters, shared with the stats line and the metrics, and
+/// the receiver's admission state. `frames` counts every frame received
+/// from it; `throttled` (over its `max_rate`), `over_share` (over its fair
+/// share of a busy queue) and `queue_drops` (queue full) are the parts of
+/// them not handed to the core.
 #[derive(Debug, Default)]
 pub struct RxCounters {
     pub frames: AtomicU64,
@@ -39,6 +44,8 @@ pub struct RxCounters {
     pub input_errors: AtomicU64,
     pub queue_drops: AtomicU64,
     pub throttled: AtomicU64,
+    pub over_share: AtomicU64,
+    pub admission: Admission,
     pub connects: AtomicU64,
     pub disconnects: AtomicU64,
 }
@@ -61,9 +68,33 @@ pub struct Registry {
     /// Bumped whenever `receivers` changes (SIGHUP), so the inputs' caches
     /// of it know to refresh.
     pub generation: AtomicU64,
+    /// How many receivers `receivers` holds (for the fair share, without a lock).
+    pub receiver_count: AtomicUsize,
+    /// Datagrams the kernel dropped on the UDP inputs' sockets, their
+    /// buffers full (`SO_RXQ_OVFL`): lost before any receiver could be named.
+    pub kernel_drops: AtomicU64,
 }
 
 impl Registry {
+    /// Adds a receiver (at start or on SIGHUP); returns its index.
+    pub fn add(&self, r: ReceiverConfig) -> usize {
+        let c = RxCounters::default();
+        c.admission.set_rate(r.max_rate);
+        let mut w = self.receivers.write().expect("registry");
+        w.push((r, Arc::new(c)));
+        self.receiver_count.store(w.len(), Ordering::Relaxed);
+        w.len() - 1
+    }
+
+    /// New settings (source, rate, ...) for a known receiver, same index.
+    pub fn update(&self, r: &ReceiverConfig) {
+        let mut w = self.receivers.write().expect("registry");
+        if let Some(e) = w.iter_mut().find(|(c, _)| c.id == r.id) {
+            e.1.admission.set_rate(r.max_rate);
+            e.0 = r.clone();
+        }
+    }
+
     pub fn index_of(&self, id: &str) -> Option<usize> {
         self.receivers.read().expect("registry").iter().position(|(r, _)| r.id == id)
     }
@@ -96,10 +127,6 @@ impl Registry {
         self.receivers.read().expect("registry")[rx].1.clone()
     }
 
-    fn max_rate(&self, rx: usize) -> f64 {
-        self.receivers.read().expect("registry")[rx].0.max_rate
-    }
-
     /// Counts a failed accept or read, logs it (the first of each power of
     /// two), and waits before the next try: an error that persists (no file
     /// descriptors left while receivers hold connections open) must not
@@ -120,35 +147,56 @@ impl Registry {
 /// `arrival`) to the core as one message: one queue operation and at most
 /// one wake-up of the core thread for all of them, not one per frame (at
 /// 1 M frames/s the per-frame sends were the largest item of the input
-/// thread's own time). The queue is bounded in frames, not messages: a
-/// batch that does not fit is dropped whole and every frame of it counted.
+/// thread's own time). First the receiver's rate limit, then its fair share
+/// of the queue (see [`admit`](super::admit)); the queue is bounded in
+/// frames, not messages: a batch that does not fit is dropped whole and
+/// every frame of it counted.
 fn forward(
     tx: &SyncSender<ToCore>,
     reg: &Registry,
-    c: &RxCounters,
+    c: &Arc<RxCounters>,
     rx: usize,
     arrival: f64,
-    frames: Vec<RawFrame>,
+    mut frames: Vec<RawFrame>,
 ) {
     let n = frames.len();
     if n == 0 {
         return;
     }
     c.frames.fetch_add(n as u64, Ordering::Relaxed);
+    let admitted = c.admission.within_rate(n, arrival);
+    if admitted < n {
+        c.throttled.fetch_add((n - admitted) as u64, Ordering::Relaxed);
+        frames.truncate(admitted);
+    }
+    let n = admitted;
+    if n == 0 {
+        return;
+    }
     let before = reg.queued.fetch_add(n, Ordering::Relaxed);
-    let dropped = if before + n > reg.queue_frames {
-        true
-    } else {
-        match tx.try_send(ToCore::Frames { rx, arrival, frames }) {
-            Ok(()) => false,
-            Err(TrySendError::Full(_)) => true,
-            Err(TrySendError::Disconnected(_)) => return,
+    let fits = c.admission.fits(n, before, reg.queue_frames, reg.receiver_count.load(Ordering::Relaxed));
+    let refused = match fits {
+        Err(why) => Some(why),
+        Ok(()) => {
+            c.admission.queued.fetch_add(n, Ordering::Relaxed);
+            match tx.try_send(ToCore::Frames { rx, arrival, frames, from: c.clone() }) {
+                Ok(()) => None,
+                Err(TrySendError::Full(_)) => {
+                    c.admission.queued.fetch_sub(n, Ordering::Relaxed);
+                    Some(Refusal::Full)
+                }
+                Err(TrySendError::Disconnected(_)) => return,
+            }
         }
     };
-    if dropped {
+    if let Some(why) = refused {
         reg.queued.fetch_sub(n, Ordering::Relaxed);
-        c.queue_drops.fetch_add(n as u64, Ordering::Relaxed);
-        reg.queue_drops.fetch_add(n as u64, Ordering::Relaxed);
+        if why == Refusal::Share {
+            c.over_share.fetch_add(n as u64, Ordering::Relaxed);
+        } else {
+            c.queue_drops.fetch_add(n as u64, Ordering::Relaxed);
+            reg.queue_drops.fetch_add(n as u64, Ordering::Relaxed);
+        }
     }
 }
 
@@ -439,12 +487,6 @@ async fn identify(
 /// Datagrams taken from the socket per system call, at most.
 const DATAGRAMS_PER_READ: usize = 32;
 
-/// Token bucket of one receiver (frames per second, one second of burst).
-struct Bucket {
-    tokens: f64,
-    at: f64,
-}
-
 fn bind_udp(input: &InputConfig) -> std::io::Result<UdpSocket> {
     let domain = if input.address.is_ipv4() { Domain::IPV4 } else { Domain::IPV6 };
     let s = Socket::new(domain, Type::DGRAM, Some(Protocol::UDP))?;
@@ -458,6 +500,9 @@ fn bind_udp(input: &InputConfig) -> std::io::Result<UdpSocket> {
     if let Err(e) = super::stamp::enable(&s) {
         tracing::warn!(input = %input.address, "no kernel receive timestamps ({e}): arrival read from the clock");
     }
+    if let Err(e) = super::stamp::count_drops(&s) {
+        tracing::warn!(input = %input.address, "the kernel's drops on this socket cannot be counted ({e})");
+    }
     UdpSocket::from_std(s.into())
 }
 
@@ -470,17 +515,18 @@ async fn udp(
     let format = if input.format == "avr" { InputFormat::Avr } else { InputFormat::Beast };
     let fixed = input.receiver.as_deref().and_then(|id| reg.index_of(id));
     let mut parsers: HashMap<usize, Box<dyn FrameParser + Send>> = HashMap::new();
-    let mut buckets: HashMap<usize, Bucket> = HashMap::new();
     // Known senders' receiver, counters and rate: a datagram costs no scan
     // of the registry and no lock (with a clock reading per frame, a seventh
     // of this task's time with 200 receivers at 1 M frames/s). Only known
     // senders are kept, so it is bounded by the receivers; refreshed when
     // the registry changes.
-    let mut senders: HashMap<IpAddr, (usize, Arc<RxCounters>, f64)> = HashMap::new();
+    let mut senders: HashMap<IpAddr, (usize, Arc<RxCounters>)> = HashMap::new();
     let mut generation = reg.generation.load(Ordering::Relaxed);
     // Any datagram fits (65,507 bytes is UDP's most over IPv4).
     let mut datagrams = super::stamp::Datagrams::new(DATAGRAMS_PER_READ, 65_536);
     let mut in_a_row = 0;
+    // The socket's count of kernel drops as last seen (it counts from 0 when bound).
+    let mut kernel_drops = 0u32;
     loop {
         let read = match sock.async_io(Interest::READABLE, || datagrams.recv(&sock)).await {
             Ok(n) => n,
@@ -490,6 +536,11 @@ async fn udp(
             }
         };
         in_a_row = 0;
+        if let Some(n) = datagrams.kernel_drops() {
+            let new = n.wrapping_sub(kernel_drops);
+            kernel_drops = n;
+            reg.kernel_drops.fetch_add(new as u64, Ordering::Relaxed);
+        }
         let now_generation = reg.generation.load(Ordering::Relaxed);
         if now_generation != generation {
             senders.clear();
@@ -507,12 +558,12 @@ async fn udp(
             let sender = match senders.get(&key) {
                 Some(s) => Some(s.clone()),
                 None => fixed.or_else(|| reg.by_source(peer.ip(), input)).map(|rx| {
-                    let s = (rx, reg.counters(rx), reg.max_rate(rx));
+                    let s = (rx, reg.counters(rx));
                     senders.insert(key, s.clone());
                     s
                 }),
             };
-            let Some((rx, c, rate)) = sender else {
+            let Some((rx, c)) = sender else {
                 let k = reg.unknown_senders.fetch_add(1, Ordering::Relaxed) + 1;
                 if k.is_power_of_two() {
                     tracing::warn!(peer = %peer, refused = k, "datagram from an unknown sender dropped");
@@ -521,16 +572,7 @@ async fn udp(
             };
             c.bytes.fetch_add(bytes.len() as u64, Ordering::Relaxed);
             let parser = parsers.entry(rx).or_insert_with(|| parser_for(format));
-            let mut frames = frames_of(parser.as_mut(), bytes, true, &c);
-            if rate > 0.0 {
-                let b = buckets.entry(rx).or_insert(Bucket { tokens: rate, at: arrival });
-                b.tokens = (b.tokens + (arrival - b.at) * rate).min(rate);
-                b.at = arrival;
-                let allowed = (b.tokens.max(0.0) as usize).min(frames.len());
-                b.tokens -= frames.len() as f64;
-                c.throttled.fetch_add((frames.len() - allowed) as u64, Ordering::Relaxed);
-                frames.truncate(allowed);
-            }
+            let frames = frames_of(parser.as_mut(), bytes, true, &c);
             forward(tx, reg, &c, rx, arrival, frames);
         }
     }
@@ -571,7 +613,7 @@ mod tests {
             receiver("b", Some("0F1E2D3C-4B5A-6978-8796-A5B4C3D2E1F0")),
             receiver("c", None),
         ] {
-            reg.receivers.write().unwrap().push((r, Arc::default()));
+            reg.add(r);
         }
         let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
         let address: std::net::SocketAddr = ([127, 0, 0, 1], port).into();
@@ -633,7 +675,7 @@ mod tests {
     #[test]
     fn the_queue_is_bounded_in_frames_and_a_batch_that_does_not_fit_is_counted_whole() {
         let reg = Registry { queue_frames: 10, ..Default::default() };
-        let c = RxCounters::default();
+        let c = Arc::new(RxCounters::default());
         // Room for many messages: the bound that bites is the frames'.
         let (tx, rx) = sync_channel(100);
         forward(&tx, &reg, &c, 3, 1.0, frames(6));
@@ -646,7 +688,7 @@ mod tests {
         let got: Vec<(usize, f64, usize)> = rx
             .try_iter()
             .map(|m| match m {
-                ToCore::Frames { rx, arrival, frames } => (rx, arrival, frames.len()),
+                ToCore::Frames { rx, arrival, frames, .. } => (rx, arrival, frames.len()),
                 _ => panic!("not frames"),
             })
             .collect();
@@ -658,5 +700,52 @@ mod tests {
         forward(&tx, &reg, &c, 0, 5.0, frames(3));
         assert_eq!(reg.queued.load(Ordering::Relaxed), 2);
         assert_eq!(reg.queue_drops.load(Ordering::Relaxed), 3);
+    }
+
+    /// A receiver flooding a core that does not keep up takes no more than
+    /// half the queue and its share; the others' frames all get in, and the
+    /// flood's are counted as over its share, not as queue drops.
+    #[test]
+    fn a_flooding_receiver_cannot_crowd_the_others_out_of_the_queue() {
+        let reg = Registry { queue_frames: 1000, ..Default::default() };
+        let receiver = |id: &str| ReceiverConfig {
+            id: id.into(),
+            lat: 0.0,
+            lon: 0.0,
+            alt_m: 0.0,
+            clock: "beast12".into(),
+            source: None,
+            beast_id: None,
+            max_rate: 0.0,
+        };
+        for id in ["flood", "a", "b", "c"] {
+            reg.add(receiver(id));
+        }
+        let (tx, core) = sync_channel(100_000);
+        let (flood, a) = (reg.counters(0), reg.counters(1));
+        // The core takes 50 frames per round; the flood brings 500, `a` 10.
+        for round in 0..200 {
+            let t = round as f64 * 0.01;
+            forward(&tx, &reg, &flood, 0, t, frames(100));
+            forward(&tx, &reg, &flood, 0, t, frames(100));
+            forward(&tx, &reg, &flood, 0, t, frames(100));
+            forward(&tx, &reg, &flood, 0, t, frames(100));
+            forward(&tx, &reg, &flood, 0, t, frames(100));
+            forward(&tx, &reg, &a, 1, t, frames(10));
+            let mut taken = 0;
+            while taken < 50 {
+                let Ok(ToCore::Frames { frames, from, .. }) = core.try_recv() else { break };
+                taken += frames.len();
+                reg.queued.fetch_sub(frames.len(), Ordering::Relaxed);
+                from.admission.queued.fetch_sub(frames.len(), Ordering::Relaxed);
+            }
+            assert!(flood.admission.queued.load(Ordering::Relaxed) <= 500 + 250);
+        }
+        assert_eq!(a.frames.load(Ordering::Relaxed), 2000);
+        assert_eq!(a.queue_drops.load(Ordering::Relaxed) + a.over_share.load(Ordering::Relaxed), 0);
+        // What the core took (at most a message past 50 a round) and what
+        // may still wait were all it admitted of the flood's 100,000.
+        assert!(flood.over_share.load(Ordering::Relaxed) >= 100_000 - 200 * 100 - 750);
+        assert_eq!(reg.queue_drops.load(Ordering::Relaxed), 0);
     }
 }

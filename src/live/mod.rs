@@ -12,6 +12,7 @@
 //! and so every track, stays. systemd is told READY once the sockets are
 //! bound and fed WATCHDOG from the core loop, so a stuck core is restarted.
 
+pub mod admit;
 pub mod config;
 pub mod inputs;
 pub mod outputs;
@@ -50,6 +51,9 @@ pub enum ToCore {
         rx: usize,
         arrival: f64,
         frames: Vec<RawFrame>,
+        /// The sender's counters: its share of the queue is given back
+        /// when the core takes the frames.
+        from: Arc<inputs::RxCounters>,
     },
     AddReceiver(ReceiverDecl),
     Outputs(Outputs),
@@ -150,7 +154,7 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
     core_cfg.publish_source_tracks = cfg.publish_source_tracks;
     let mut decls = Vec::new();
     for r in &cfg.receiver {
-        registry.receivers.write().expect("registry").push((r.clone(), Default::default()));
+        registry.add(r.clone());
         decls.push(r.decl());
     }
     let outputs = Outputs::new(&cfg.output, &cfg.service);
@@ -212,14 +216,11 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
                     Ok(new) => {
                         for r in &new.receiver {
                             if registry.index_of(&r.id).is_none() {
-                                registry.receivers.write().expect("registry").push((r.clone(), Default::default()));
+                                registry.add(r.clone());
                                 let _ = tx.send(ToCore::AddReceiver(r.decl()));
                             } else {
                                 // Same index, new settings (source, rate).
-                                let mut w = registry.receivers.write().expect("registry");
-                                if let Some(e) = w.iter_mut().find(|(c, _)| c.id == r.id) {
-                                    e.0 = r.clone();
-                                }
+                                registry.update(r);
                             }
                         }
                         registry.generation.fetch_add(1, Ordering::Relaxed);
@@ -350,12 +351,13 @@ fn core_loop(
         let mut n = 0;
         while let Some(m) = msg.take() {
             match m {
-                ToCore::Frames { rx: r, arrival, mut frames } => {
+                ToCore::Frames { rx: r, arrival, mut frames, from } => {
                     let room = BATCH.saturating_sub(n).max(1);
                     if frames.len() > room {
                         let rest = frames.split_off(room);
-                        carry = Some(ToCore::Frames { rx: r, arrival, frames: rest });
+                        carry = Some(ToCore::Frames { rx: r, arrival, frames: rest, from: from.clone() });
                     }
+                    from.admission.queued.fetch_sub(frames.len(), Ordering::Relaxed);
                     for frame in &frames {
                         if let Some(w) = &mut recorder {
                             let _ = w.frame(arrival, r, frame);
@@ -394,6 +396,18 @@ fn core_loop(
             for (id, n) in front.late_copies() {
                 metrics::counter!("fuse1090_receiver_late_copies_total", "receiver" => id.to_string())
                     .absolute(n);
+            }
+            // MLAT exclusion is a state, not a sentence: an excluded receiver
+            // is still synchronised and comes back (gauge 1 while it is out).
+            for (id, h) in front.mlat_health() {
+                let id = id.to_string();
+                metrics::gauge!("fuse1090_receiver_mlat_excluded", "receiver" => id.clone())
+                    .set(h.excluded as u8 as f64);
+                metrics::counter!("fuse1090_receiver_mlat_exclusions_total", "receiver" => id.clone())
+                    .absolute(h.exclusions);
+                metrics::counter!("fuse1090_receiver_clock_resets_total", "receiver" => id.clone())
+                    .absolute(h.clock_resets);
+                metrics::gauge!("fuse1090_receiver_sync_outlier_rate", "receiver" => id).set(h.outlier_rate);
             }
         }
         // The next batch's buffer at this one's size: grown from empty, every
@@ -453,6 +467,8 @@ fn back_loop(
     let mut next_metrics = 0.0;
     let mut next_stats = unix_now() + stats_every;
     let mut last = unix_now();
+    // The fixes counted at the last stats line: its rate is of the interval.
+    let mut last_fixes = 0;
     for msg in rx {
         let (cmds, now) = match msg {
             ToBack::Outputs(o) => {
@@ -468,19 +484,21 @@ fn back_loop(
         outputs.publish(&events, |i| back.receiver_id(i), now);
         events.clear();
         if now >= next_stats {
-            stats_line(&front, &back, &registry, &outputs, now - last);
+            stats_line(&front, &back, &registry, &outputs, (front.stats.fixes - last_fixes, now - last));
             next_stats = now + stats_every;
-            last = now;
+            (last, last_fixes) = (now, front.stats.fixes);
         }
         if now >= next_metrics {
             metrics(&front, &back, &registry, &outputs);
             next_metrics = now + 1.0;
         }
     }
-    stats_line(&front, &back, &registry, &outputs, unix_now() - last);
+    stats_line(&front, &back, &registry, &outputs, (front.stats.fixes - last_fixes, unix_now() - last));
 }
 
-fn stats_line(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outputs, span_s: f64) {
+/// The log's stats line; `(fixes, span_s)`: the fixes made since the last
+/// one and the time since.
+fn stats_line(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outputs, recent: (u64, f64)) {
     let s = &front.stats;
     let f = back.fuser().stats();
     let per_rx: Vec<String> = reg
@@ -490,12 +508,13 @@ fn stats_line(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outp
         .iter()
         .map(|(r, c)| {
             format!(
-                "{}={}/{}err/{}drop/{}thr",
+                "{}={}/{}err/{}drop/{}thr/{}share",
                 r.id,
                 c.frames.load(Ordering::Relaxed),
                 c.input_errors.load(Ordering::Relaxed),
                 c.queue_drops.load(Ordering::Relaxed),
-                c.throttled.load(Ordering::Relaxed)
+                c.throttled.load(Ordering::Relaxed),
+                c.over_share.load(Ordering::Relaxed)
             )
         })
         .collect();
@@ -503,14 +522,14 @@ fn stats_line(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outp
     tracing::info!(
         "stats: frames {} [{}], messages {}, aircraft {}, tracks {}, fixes {} ({:.1}/s), suspects {}, conflicts {}, \
          rejected measurements {}, fusion fallbacks {}, unknown senders {}, socket errors {}, queue drops {}, \
-         output errors {}, mlat {} (self-synchronised {}), late copies {}",
+         kernel drops {}, output errors {}, mlat {} (self-synchronised {}), late copies {}",
         s.frames,
         per_rx.join(" "),
         s.messages,
         front.aircraft,
         back.fuser().tracks(),
         s.fixes,
-        s.fixes as f64 / span_s.max(1e-9),
+        recent.0 as f64 / recent.1.max(1e-9),
         f.suspect_flags,
         f.conflicts,
         f.rejected().iter().map(|(_, n)| n).sum::<u64>(),
@@ -518,6 +537,7 @@ fn stats_line(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outp
         reg.unknown_senders.load(Ordering::Relaxed),
         reg.socket_errors.load(Ordering::Relaxed),
         reg.queue_drops.load(Ordering::Relaxed),
+        reg.kernel_drops.load(Ordering::Relaxed),
         out_err,
         front.mlat_fixes,
         front.self_synced_fixes,
@@ -538,6 +558,8 @@ fn metrics(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outputs
     metrics::counter!("fuse1090_unknown_senders_total").absolute(reg.unknown_senders.load(Ordering::Relaxed));
     metrics::counter!("fuse1090_socket_errors_total").absolute(reg.socket_errors.load(Ordering::Relaxed));
     metrics::counter!("fuse1090_queue_drops_total").absolute(reg.queue_drops.load(Ordering::Relaxed));
+    // Datagrams lost in the kernel, the UDP inputs' buffers full.
+    metrics::counter!("fuse1090_udp_kernel_drops_total").absolute(reg.kernel_drops.load(Ordering::Relaxed));
     // Frames waiting for the core: it fills before anything is dropped.
     metrics::gauge!("fuse1090_queue_frames").set(reg.queued.load(Ordering::Relaxed) as f64);
     for (r, c) in reg.receivers.read().expect("registry").iter() {
@@ -546,8 +568,12 @@ fn metrics(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outputs
             .absolute(c.frames.load(Ordering::Relaxed));
         metrics::counter!("fuse1090_receiver_input_errors_total", "receiver" => id.clone())
             .absolute(c.input_errors.load(Ordering::Relaxed));
-        metrics::counter!("fuse1090_receiver_throttled_total", "receiver" => id)
+        metrics::counter!("fuse1090_receiver_throttled_total", "receiver" => id.clone())
             .absolute(c.throttled.load(Ordering::Relaxed));
+        metrics::counter!("fuse1090_receiver_over_share_total", "receiver" => id.clone())
+            .absolute(c.over_share.load(Ordering::Relaxed));
+        metrics::counter!("fuse1090_receiver_queue_drops_total", "receiver" => id)
+            .absolute(c.queue_drops.load(Ordering::Relaxed));
     }
     let f = back.fuser().stats();
     metrics::counter!("fuse1090_tracks_published_total").absolute(f.published);

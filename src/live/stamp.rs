@@ -31,9 +31,36 @@ pub fn enable<F: AsFd>(_socket: &F) -> std::io::Result<()> {
     Err(std::io::Error::new(std::io::ErrorKind::Unsupported, "SO_TIMESTAMPNS is Linux's"))
 }
 
+/// Asks the kernel to tell, with each datagram, how many it has dropped on
+/// this socket so far for want of buffer space (`SO_RXQ_OVFL`): losses no
+/// counter of ours could otherwise see.
+#[cfg(target_os = "linux")]
+pub fn count_drops<F: AsFd>(socket: &F) -> std::io::Result<()> {
+    nix::sys::socket::setsockopt(socket, nix::sys::socket::sockopt::RxqOvfl, &1).map_err(std::io::Error::from)
+}
+
+#[cfg(not(target_os = "linux"))]
+pub fn count_drops<F: AsFd>(_socket: &F) -> std::io::Result<()> {
+    Err(std::io::Error::new(std::io::ErrorKind::Unsupported, "SO_RXQ_OVFL is Linux's"))
+}
+
+/// The kernel's running count of drops on the socket, in a control message.
+#[cfg(target_os = "linux")]
+fn drops(c: &ControlMessageOwned) -> Option<u32> {
+    match c {
+        ControlMessageOwned::RxqOvfl(n) => Some(*n),
+        _ => None,
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn drops(_c: &ControlMessageOwned) -> Option<u32> {
+    None
+}
+
 /// The kernel's stamp in a control message, as Unix seconds.
 #[cfg(target_os = "linux")]
-fn stamp(c: ControlMessageOwned) -> Option<f64> {
+fn stamp(c: &ControlMessageOwned) -> Option<f64> {
     match c {
         ControlMessageOwned::ScmTimestampns(ts) => Some(ts.tv_sec() as f64 + ts.tv_nsec() as f64 * 1e-9),
         _ => None,
@@ -41,7 +68,7 @@ fn stamp(c: ControlMessageOwned) -> Option<f64> {
 }
 
 #[cfg(not(target_os = "linux"))]
-fn stamp(_c: ControlMessageOwned) -> Option<f64> {
+fn stamp(_c: &ControlMessageOwned) -> Option<f64> {
     None
 }
 
@@ -51,23 +78,27 @@ fn socket_addr(a: &SockaddrStorage) -> Option<SocketAddr> {
         .or_else(|| a.as_sockaddr_in6().map(|v6| SocketAddr::from(std::net::SocketAddrV6::from(*v6))))
 }
 
-/// What a received message says: its length, its sender and when it
-/// arrived (Unix seconds: the kernel's stamp, else the clock now). A
-/// truncated control buffer (not expected: it holds one stamp) loses the
-/// stamp, not the message.
-fn received(msg: &RecvMsg<'_, '_, SockaddrStorage>) -> (usize, Option<SocketAddr>, f64) {
-    let arrival = msg.cmsgs().ok().into_iter().flatten().find_map(stamp);
-    (msg.bytes, msg.address.as_ref().and_then(socket_addr), arrival.unwrap_or_else(unix_now))
+/// What a received message says: its length, its sender, when it arrived
+/// (Unix seconds: the kernel's stamp, else the clock now) and the socket's
+/// drop count if the kernel sent one. A truncated control buffer (not
+/// expected: it holds both) loses them, not the message.
+fn received(msg: &RecvMsg<'_, '_, SockaddrStorage>) -> ((usize, Option<SocketAddr>, f64), Option<u32>) {
+    let (mut arrival, mut dropped) = (None, None);
+    for c in msg.cmsgs().ok().into_iter().flatten() {
+        arrival = arrival.or_else(|| stamp(&c));
+        dropped = dropped.or_else(|| drops(&c));
+    }
+    ((msg.bytes, msg.address.as_ref().and_then(socket_addr), arrival.unwrap_or_else(unix_now)), dropped)
 }
 
 /// One datagram (or TCP read): see [`received`]. Blocking or not as the
 /// socket is; `WouldBlock` and timeouts come back as errors.
 pub fn recv<F: AsRawFd>(socket: &F, buf: &mut [u8]) -> std::io::Result<(usize, Option<SocketAddr>, f64)> {
-    let mut control = nix::cmsg_space!(nix::sys::time::TimeSpec);
+    let mut control = nix::cmsg_space!(nix::sys::time::TimeSpec, u32);
     let mut iov = [IoSliceMut::new(buf)];
     let msg =
         recvmsg::<SockaddrStorage>(socket.as_raw_fd(), &mut iov, Some(&mut control), MsgFlags::empty())?;
-    Ok(received(&msg))
+    Ok(received(&msg).0)
 }
 
 /// Datagrams read several at a time (`recvmmsg` on Linux), each with its
@@ -79,13 +110,16 @@ pub struct Datagrams {
     bufs: Vec<Vec<u8>>,
     /// Per datagram read: length, sender, arrival.
     got: Vec<(usize, Option<SocketAddr>, f64)>,
+    /// The kernel's count of drops on the socket, as of the last read that
+    /// brought one (see [`count_drops`]).
+    kernel_drops: Option<u32>,
 }
 
 impl Datagrams {
     /// Up to `batch` datagrams of up to `size` bytes each per read.
     pub fn new(batch: usize, size: usize) -> Datagrams {
         let batch = if cfg!(target_os = "linux") { batch.max(1) } else { 1 };
-        Datagrams { bufs: vec![vec![0u8; size]; batch], got: Vec::with_capacity(batch) }
+        Datagrams { bufs: vec![vec![0u8; size]; batch], got: Vec::with_capacity(batch), kernel_drops: None }
     }
 
     /// Reads what is waiting, up to the batch (at least one datagram, or
@@ -98,7 +132,7 @@ impl Datagrams {
             // `Send`, which a spawned input task must be.
             let mut headers = nix::sys::socket::MultiHeaders::<SockaddrStorage>::preallocate(
                 self.bufs.len(),
-                Some(nix::cmsg_space!(nix::sys::time::TimeSpec)),
+                Some(nix::cmsg_space!(nix::sys::time::TimeSpec, u32)),
             );
             let mut iovs: Vec<[IoSliceMut; 1]> = self.bufs.iter_mut().map(|b| [IoSliceMut::new(b)]).collect();
             let msgs = nix::sys::socket::recvmmsg(
@@ -108,7 +142,11 @@ impl Datagrams {
                 MsgFlags::MSG_DONTWAIT,
                 None,
             )?;
-            self.got.extend(msgs.map(|msg| received(&msg)));
+            for msg in msgs {
+                let (d, dropped) = received(&msg);
+                self.got.push(d);
+                self.kernel_drops = dropped.or(self.kernel_drops);
+            }
         }
         #[cfg(not(target_os = "linux"))]
         {
@@ -116,6 +154,12 @@ impl Datagrams {
             self.got.push(d);
         }
         Ok(self.got.len())
+    }
+
+    /// The kernel's running count of datagrams it dropped on the socket
+    /// (wrapping at 2^32), once it has sent one.
+    pub fn kernel_drops(&self) -> Option<u32> {
+        self.kernel_drops
     }
 
     /// The `i`th datagram of the last read: bytes, sender, arrival.
@@ -232,5 +276,34 @@ mod tests {
             tries.push(arrival - sent);
         }
         panic!("every read stamped at its read, not its arrival: {tries:?} s after sending");
+    }
+
+    /// Datagrams sent to a socket whose small buffer is full are lost in
+    /// the kernel; the next read says how many.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn the_kernels_drops_on_a_full_socket_are_counted() {
+        let rx = socket2::Socket::new(socket2::Domain::IPV4, socket2::Type::DGRAM, None).unwrap();
+        rx.set_recv_buffer_size(4096).unwrap();
+        rx.bind(&"127.0.0.1:0".parse::<SocketAddr>().unwrap().into()).unwrap();
+        let rx: UdpSocket = rx.into();
+        count_drops(&rx).unwrap();
+        rx.set_nonblocking(true).unwrap();
+        let tx = UdpSocket::bind("127.0.0.1:0").unwrap();
+        for _ in 0..200 {
+            tx.send_to(&[7u8; 200], rx.local_addr().unwrap()).unwrap();
+        }
+        let mut d = Datagrams::new(8, 256);
+        let mut got = 0;
+        while let Ok(n) = d.recv(&rx) {
+            got += n;
+        }
+        // The count comes with the first datagram queued after the drops.
+        assert_eq!(d.kernel_drops(), None);
+        tx.send_to(&[7u8; 200], rx.local_addr().unwrap()).unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(20));
+        got += d.recv(&rx).unwrap() - 1;
+        let dropped = d.kernel_drops().expect("a drop count") as usize;
+        assert!(dropped > 0 && got + dropped == 200, "read {got}, dropped {dropped}");
     }
 }

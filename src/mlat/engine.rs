@@ -161,6 +161,8 @@ pub struct MlatStats {
 }
 
 struct Rx {
+    /// Its configured id, for the log.
+    id: String,
     ecef: [f64; 3],
     clock: ClockKind,
     /// Configured jitter (s): the prior for the learnt noise.
@@ -334,6 +336,7 @@ impl Mlat {
             ClockKind::Gps => self.cfg.jitter_gps_ns,
         };
         self.rxs.push(Rx {
+            id: d.id.clone(),
             ecef: geodetic_to_ecef(d.lat, d.lon, d.alt),
             clock: d.clock,
             sigma_t: jitter * 1e-9,
@@ -342,7 +345,7 @@ impl Mlat {
             gps_partner: None,
             cal: Calibration::default(),
         });
-        self.sync.add_receiver(d.clock);
+        self.sync.add_receiver(d.clock, &d.id);
     }
 
     /// An altitude heard from an aircraft (any message), for later
@@ -428,7 +431,13 @@ impl Mlat {
                         self.sync.reset_receiver(rx);
                         self.rxs[rx].beast_epoch = Some(ts);
                         self.rxs[rx].last_seen = Some((0.0, arrival));
-                        tracing::info!(receiver = rx, "clock jump: receiver restarted");
+                        // A receiver whose clock jumps all the time must not
+                        // flood the log: its first jumps, then each power of
+                        // two (all of them in the metric).
+                        let n = self.sync.health[rx].clock_resets;
+                        if n.is_power_of_two() {
+                            tracing::info!(receiver = %self.rxs[rx].id, jumps = n, "clock jump: receiver restarted");
+                        }
                         return 0.0;
                     }
                 }
@@ -450,7 +459,9 @@ impl Mlat {
             self.stats.too_few_receivers += (g.copies.len() < 2) as u64;
             return None;
         }
-        // Usable copies: known receiver, timing, healthy, not next to another.
+        // Usable copies: known receiver, timing. An excluded receiver's are
+        // read (its clock jumps seen) and synchronise it, so that it comes
+        // back once its sync holds; they stay out of the fix.
         let mut copies: GroupVec<LocalCopy> = GroupVec::new();
         let mut arrivals: GroupVec<f64> = GroupVec::new();
         for c in &g.copies {
@@ -460,10 +471,6 @@ impl Mlat {
             }
             if !crate::feed::has_timing(c.timestamp) {
                 self.stats.no_timing += 1;
-                continue;
-            }
-            if self.sync.health[c.rx].excluded {
-                self.stats.excluded_receiver_copies += 1;
                 continue;
             }
             let t = self.local_time(c.rx, c.timestamp, c.arrival);
@@ -482,6 +489,16 @@ impl Mlat {
                 self.sync.note_reference(&copies, info.addr);
                 self.judge_sync_source(info.addr, nis_sum, judged);
             }
+        }
+        if copies.iter().any(|c| self.sync.health[c.rx].excluded) {
+            let before = copies.len();
+            let kept: GroupVec<(LocalCopy, f64)> = (copies.iter().zip(&arrivals))
+                .filter(|(c, _)| !self.sync.health[c.rx].excluded)
+                .map(|(c, a)| (*c, *a))
+                .collect();
+            copies = kept.iter().map(|k| k.0).collect();
+            arrivals = kept.iter().map(|k| k.1).collect();
+            self.stats.excluded_receiver_copies += (before - copies.len()) as u64;
         }
         if let Some(a) = info.alt_baro_ft {
             self.note_altitude(info.addr, a, info.baro_correction, now);
@@ -1013,5 +1030,60 @@ mod tests {
         assert_eq!(m.stats.close_receivers, 0);
         assert_eq!(f.dof, 3, "6 sites + altitude - 4 unknowns");
         assert!(crate::geo::distance_m(f.lat, f.lon, 48.75, 2.40) < 5.0);
+    }
+
+    /// A counter-timed receiver whose timestamps step by 2 s (less than a
+    /// restart's 5 s) is excluded while its pairs fail, keeps synchronising
+    /// while out, and is readmitted once its sync holds again: exclusion is
+    /// never for good.
+    #[test]
+    fn an_excluded_receiver_is_readmitted_when_its_sync_holds_again() {
+        let (mut m, mut rxs) = engine();
+        let counter =
+            ReceiverDecl { id: "c".into(), lat: 48.7, lon: 2.45, alt: 100.0, clock: ClockKind::Beast12 };
+        m.add_receiver(&counter);
+        rxs.push(counter.clone());
+        let c_ecef = geodetic_to_ecef(counter.lat, counter.lon, counter.alt);
+        let t0 = 1_700_000_000.0;
+        let (mut excluded_at, mut readmitted_at) = (None, None);
+        let mut last_fix_used_it = false;
+        for k in 0..1200 {
+            let t = t0 + k as f64 * 0.5;
+            let (lat, lon) = (48.5 + 0.02 * (k % 23) as f64, 2.1 + 0.03 * (k % 19) as f64);
+            let target = geodetic_to_ecef(lat, lon, 30_000.0 * FT_TO_M);
+            let mut g = group(&rxs[..5], target, t);
+            let step = if k >= 200 { 2.0 } else { 0.0 };
+            let toa = t - t0 + 100.0 + ecef_distance(c_ecef, target) / C_AIR + step;
+            g.copies.push(Copy {
+                rx: 5,
+                timestamp: (toa * 12e6).round() as u64,
+                arrival: t + 0.1,
+                signal: 90,
+            });
+            // Traffic of many aircraft (each judged as a sync source on its
+            // own), every other transmission an ADS-B position.
+            g.info.addr = 0x400000 + (k % 40) as u32;
+            if k % 2 == 0 {
+                g.info.adsb_ecef = Some(target);
+                g.info.adsb_sigma_m = 5.0;
+            }
+            let fix = m.on_group(&g, t + 0.2);
+            let out = m.sync.health[5].excluded;
+            if out && excluded_at.is_none() {
+                excluded_at = Some(k);
+            }
+            if !out && excluded_at.is_some() && readmitted_at.is_none() {
+                readmitted_at = Some(k);
+            }
+            if let Some(f) = fix {
+                last_fix_used_it = f.receivers.contains(&5);
+            }
+        }
+        let out = excluded_at.expect("excluded after the step");
+        assert!((200..260).contains(&out), "excluded at {out}");
+        let back = readmitted_at.expect("readmitted");
+        assert!(back < out + 400, "readmitted at {back}");
+        assert!(m.stats.excluded_receiver_copies > 0);
+        assert!(last_fix_used_it, "back in the fixes");
     }
 }

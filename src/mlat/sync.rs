@@ -117,6 +117,8 @@ pub struct ClockSync {
     /// index order: what `gps_peers` answers without asking every receiver.
     gps_peers: Vec<Vec<usize>>,
     pub health: Vec<RxHealth>,
+    /// The receivers' ids, for the log.
+    ids: Vec<String>,
     pub references: Vec<Reference>,
     pub stats: SyncStats,
 }
@@ -134,13 +136,15 @@ impl ClockSync {
             clocks: Vec::new(),
             gps_peers: Vec::new(),
             health: Vec::new(),
+            ids: Vec::new(),
             references: Vec::new(),
             stats: SyncStats::default(),
         }
     }
 
-    pub fn add_receiver(&mut self, clock: ClockKind) {
+    pub fn add_receiver(&mut self, clock: ClockKind, id: &str) {
         self.clocks.push(clock);
+        self.ids.push(id.to_string());
         self.gps_peers.push(Vec::new());
         self.health.push(RxHealth::default());
         self.references.push(Reference::default());
@@ -228,13 +232,16 @@ impl ClockSync {
                     Update::Accepted => {}
                 }
                 let outlier = result != Update::Accepted;
-                if let Some(nis) = nis {
+                // An excluded receiver still synchronises (so that it can
+                // come back, and a later clock jump is seen), but its pairs
+                // neither judge the emitter nor count against its partner.
+                let (out_i, out_j) = (self.health[i].excluded, self.health[j].excluded);
+                if let (Some(nis), false) = (nis, out_i || out_j) {
                     nis_sum += nis.min(100.0);
                     judged += 1;
                 }
-                for rx in [i, j] {
-                    self.note_health(rx, outlier);
-                }
+                self.note_health(i, outlier && !out_j);
+                self.note_health(j, outlier && !out_i);
             }
         }
         (nis_sum, judged)
@@ -256,7 +263,7 @@ impl ClockSync {
     }
 
     fn note_health(&mut self, rx: usize, outlier: bool) {
-        let h = &mut self.health[rx];
+        let (h, id) = (&mut self.health[rx], &self.ids[rx]);
         h.sync_updates += 1;
         h.sync_outliers += outlier as u64;
         h.outlier_rate = 0.97 * h.outlier_rate + 0.03 * outlier as u8 as f64;
@@ -265,13 +272,13 @@ impl ClockSync {
                 h.excluded = true;
                 h.exclusions += 1;
                 tracing::warn!(
-                    receiver = rx,
+                    receiver = %id,
                     rate = h.outlier_rate,
                     "receiver excluded from MLAT: sync keeps failing"
                 );
             } else if h.excluded && h.outlier_rate < READMIT_RATE {
                 h.excluded = false;
-                tracing::info!(receiver = rx, "receiver readmitted to MLAT");
+                tracing::info!(receiver = %id, "receiver readmitted to MLAT");
             }
         }
     }
@@ -401,8 +408,8 @@ mod tests {
         // ahead of receiver 0's: converting 1 -> 0 must not depend on which
         // index is lower.
         let mut s = ClockSync::new(PairParams::default());
-        s.add_receiver(ClockKind::Beast12);
-        s.add_receiver(ClockKind::Beast12);
+        s.add_receiver(ClockKind::Beast12, "b");
+        s.add_receiver(ClockKind::Beast12, "b");
         let clock1 = |t0: f64| 5000.0 + t0 * (1.0 + 100e-6);
         let g = [0.0; 4];
         for k in 0..20 {
@@ -433,7 +440,7 @@ mod tests {
         let mut s = ClockSync::new(PairParams::default());
         for c in [ClockKind::Gps, ClockKind::Beast12, ClockKind::Beast12, ClockKind::Gps, ClockKind::Beast12]
         {
-            s.add_receiver(c);
+            s.add_receiver(c, "r");
         }
         let copies = |rxs: &[usize]| rxs.iter().map(|&rx| LocalCopy { rx, t: 10.0 }).collect::<Vec<_>>();
         for (k, rxs) in [vec![3, 1], vec![2, 0, 1], vec![1, 3], vec![4, 2]].into_iter().enumerate() {
@@ -484,9 +491,9 @@ mod tests {
     #[test]
     fn a_chain_of_pairs_puts_everyone_on_the_gps_clock() {
         let mut s = ClockSync::new(PairParams::default());
-        s.add_receiver(ClockKind::Beast12); // 0: offset +100 s from true time
-        s.add_receiver(ClockKind::Gps); // 1
-        s.add_receiver(ClockKind::Beast12); // 2: offset -50 s
+        s.add_receiver(ClockKind::Beast12, "b"); // 0: offset +100 s from true time
+        s.add_receiver(ClockKind::Gps, "g"); // 1
+        s.add_receiver(ClockKind::Beast12, "b"); // 2: offset -50 s
         let offsets = [100.0, 0.0, -50.0];
         let var = [1e-16; 3];
         let g = [0.0; 9];
