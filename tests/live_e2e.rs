@@ -16,7 +16,7 @@ use std::collections::{HashMap, HashSet};
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream, UdpSocket};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use fuse1090::feed::capture::{CaptureReader, ClockKind};
@@ -24,94 +24,10 @@ use fuse1090::sim::scenario::Scenario;
 use serde_json::Value;
 
 mod common;
+use common::live::*;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_fuse1090"))
-}
-
-/// The daemon on `cfg`, logging at info level to `log` (and, with
-/// `max_fds`, under that descriptor limit).
-fn daemon(cfg: &Path, log: &Path, max_fds: Option<u32>) -> Child {
-    let mut cmd = match max_fds {
-        Some(n) => {
-            let mut c = Command::new("sh");
-            c.args(["-c", &format!("ulimit -n {n} && exec \"$0\" \"$@\"")])
-                .arg(env!("CARGO_BIN_EXE_fuse1090"));
-            c
-        }
-        None => bin(),
-    };
-    cmd.args(["run", "--config"])
-        .arg(cfg)
-        .env("RUST_LOG", "info")
-        .stderr(Stdio::from(std::fs::File::create(log).unwrap()))
-        .stdout(Stdio::null())
-        .spawn()
-        .unwrap()
-}
-
-/// One Beast Mode S long frame (a DF17 airborne position; the inputs count
-/// frames before any CRC check).
-fn beast_frame() -> Vec<u8> {
-    let mut frame = vec![0x1a, b'3', 0, 0, 0, 0, 0, 1, 0x80];
-    frame.extend_from_slice(&[
-        0x8d, 0x40, 0x62, 0x1d, 0x58, 0xc3, 0x82, 0xd6, 0x90, 0xc8, 0xac, 0x28, 0x63, 0xa7,
-    ]);
-    frame
-}
-
-/// The newest stats line of a log ("" before the first).
-fn newest_stats(log: &Path) -> String {
-    let log = std::fs::read_to_string(log).unwrap_or_default();
-    log.lines().rev().find(|l| l.contains("stats: frames")).unwrap_or("").to_string()
-}
-
-/// The number after `label` in the newest stats line of a log (0 if none).
-fn stats_number(log: &Path, label: &str) -> u64 {
-    let last = newest_stats(log);
-    let digits: String =
-        last.split(label).nth(1).unwrap_or("").chars().take_while(char::is_ascii_digit).collect();
-    digits.parse().unwrap_or(0)
-}
-
-/// Receiver `id`'s frame count in the newest stats line of a log.
-fn counted(log: &Path, id: &str) -> u64 {
-    let last = newest_stats(log);
-    last.split([' ', '['])
-        .find_map(|w| w.strip_prefix(&format!("{id}=")))
-        .and_then(|r| r.split('/').next())
-        .and_then(|n| n.parse().ok())
-        .unwrap_or(0)
-}
-
-/// Polls a daemon's log until it holds `needle`: a loaded CI machine may
-/// take its time to start or re-read.
-fn wait_for_log(log: &Path, needle: &str) {
-    let t0 = Instant::now();
-    while !std::fs::read_to_string(log).unwrap_or_default().contains(needle) {
-        assert!(t0.elapsed() < Duration::from_secs(10), "no {needle:?} in {}", log.display());
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
-
-/// The daemon's exit status once it has exited, if it does within `limit`
-/// (still running then: killed, and `None`).
-fn exit_within(child: &mut Child, limit: Duration) -> Option<std::process::ExitStatus> {
-    let t0 = Instant::now();
-    loop {
-        if let Some(st) = child.try_wait().unwrap() {
-            return Some(st);
-        }
-        if t0.elapsed() > limit {
-            child.kill().unwrap();
-            return None;
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
 }
 
 /// Waits up to 5 s for the daemon to close its end of `sock`.
@@ -122,10 +38,6 @@ fn closed_by_the_daemon(sock: &mut TcpStream) -> Result<(), String> {
         Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => Ok(()),
         other => Err(format!("{other:?}")),
     }
-}
-
-fn signal(child: &Child, sig: &str) {
-    assert!(Command::new("kill").args(["-s", sig, &child.id().to_string()]).status().unwrap().success());
 }
 
 /// Datagrams received on a socket until `until`.
@@ -681,15 +593,6 @@ fn a_silent_receiver_is_reconnected_after_the_idle_timeout() {
     assert!(daemon.wait().unwrap().success());
     let log = std::fs::read_to_string(&log_path).unwrap();
     assert!(log.contains("nothing received for 0.5 s"), "{log}");
-}
-
-/// The Prometheus endpoint's text (a plain HTTP/1.0 GET).
-fn scrape(addr: std::net::SocketAddr) -> String {
-    let Ok(mut s) = TcpStream::connect(addr) else { return String::new() };
-    let _ = s.write_all(b"GET /metrics HTTP/1.0\r\nHost: localhost\r\n\r\n");
-    let mut text = String::new();
-    let _ = s.read_to_string(&mut text);
-    text
 }
 
 /// A TCP read brings thousands of frames at once; the core takes them in

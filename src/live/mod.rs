@@ -494,6 +494,7 @@ fn back_loop(
         }
     }
     stats_line(&front, &back, &registry, &outputs, (front.stats.fixes - last_fixes, unix_now() - last));
+    outputs::flush_stdout(Duration::from_secs(1));
 }
 
 /// The log's stats line; `(fixes, span_s)`: the fixes made since the last
@@ -518,11 +519,12 @@ fn stats_line(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outp
             )
         })
         .collect();
-    let out_err: u64 = outputs.dests.iter().map(|d| d.errors).sum();
+    let out_err: u64 = outputs.dests.iter().map(|d| d.errors()).sum();
+    let out_dropped: u64 = outputs.dests.iter().map(|d| d.dropped).sum();
     tracing::info!(
         "stats: frames {} [{}], messages {}, aircraft {}, tracks {}, fixes {} ({:.1}/s), suspects {}, conflicts {}, \
          rejected measurements {}, fusion fallbacks {}, unknown senders {}, socket errors {}, queue drops {}, \
-         kernel drops {}, output errors {}, mlat {} (self-synchronised {}), late copies {}",
+         kernel drops {}, output errors {}, output drops {}, mlat {} (self-synchronised {}), late copies {}",
         s.frames,
         per_rx.join(" "),
         s.messages,
@@ -539,6 +541,7 @@ fn stats_line(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outp
         reg.queue_drops.load(Ordering::Relaxed),
         reg.kernel_drops.load(Ordering::Relaxed),
         out_err,
+        out_dropped,
         front.mlat_fixes,
         front.self_synced_fixes,
         s.late_copies,
@@ -587,7 +590,10 @@ fn metrics(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outputs
     metrics::counter!("fuse1090_measurements_gated_total").absolute(f.gated);
     metrics::counter!("fuse1090_track_restarts_total").absolute(f.restarts);
     metrics::counter!("fuse1090_fusion_fallbacks_total").absolute(f.fusion_fallbacks);
-    metrics::counter!("fuse1090_output_errors_total").absolute(outputs.dests.iter().map(|d| d.errors).sum());
+    metrics::counter!("fuse1090_output_errors_total")
+        .absolute(outputs.dests.iter().map(|d| d.errors()).sum());
+    // Lines a stdout output's reader was too slow for.
+    metrics::counter!("fuse1090_output_drops_total").absolute(outputs.dests.iter().map(|d| d.dropped).sum());
 }
 
 #[cfg(all(test, target_os = "linux"))]

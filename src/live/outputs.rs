@@ -1,11 +1,18 @@
 //! Output destinations: UDP (unicast or multicast) in JSON or ASTERIX
-//! CAT062, or JSON lines on stdout. Sockets are non-blocking and every
-//! error is counted: a destination that is unreachable never blocks or
-//! stops the others, and nothing is sent anywhere but the configured
-//! addresses.
+//! CAT062, or JSON lines on stdout. Nothing here may block the core:
+//! sockets are non-blocking, and stdout (a pipe nobody reads blocks its
+//! writer for good) is written by a thread of its own behind a bounded
+//! queue, whose overflow is dropped and counted. Every error is counted:
+//! a destination that is unreachable never blocks or stops the others, and
+//! nothing is sent anywhere but the configured addresses. UDP sockets are
+//! connected to their destination, so that the kernel reports a refusal
+//! (ICMP port unreachable) as an error of the next send.
 
 use std::io::Write;
 use std::net::{SocketAddr, UdpSocket};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{sync_channel, SyncSender, TrySendError};
+use std::sync::{Arc, OnceLock};
 
 use socket2::{Domain, Protocol, Socket, Type};
 
@@ -17,8 +24,21 @@ pub struct Destination {
     pub cfg: OutputConfig,
     socket: Option<UdpSocket>,
     pub sent: u64,
-    pub errors: u64,
+    errors: u64,
+    /// Lines a stdout output could not queue (its reader too slow).
+    pub dropped: u64,
     last_error_log: f64,
+}
+
+impl Destination {
+    /// Sends that failed (for stdout, the writer's failed writes, which
+    /// every stdout output shares).
+    pub fn errors(&self) -> u64 {
+        match self.cfg.kind.as_str() {
+            "stdout" => self.errors + stdout_writer().errors.load(Ordering::Relaxed),
+            _ => self.errors,
+        }
+    }
 }
 
 fn udp_socket(cfg: &OutputConfig, addr: SocketAddr) -> std::io::Result<UdpSocket> {
@@ -35,8 +55,67 @@ fn udp_socket(cfg: &OutputConfig, addr: SocketAddr) -> std::io::Result<UdpSocket
     let any: SocketAddr =
         if addr.is_ipv4() { "0.0.0.0:0".parse().unwrap() } else { "[::]:0".parse().unwrap() };
     s.bind(&any.into())?;
+    s.connect(&addr.into())?;
     s.set_nonblocking(true)?;
     Ok(s.into())
+}
+
+/// Lines for stdout, waiting for its writer thread: at most this many; a
+/// reader that stops reading costs lines, never the core.
+const STDOUT_QUEUE: usize = 4096;
+
+/// The process's one stdout writer (every stdout output of every
+/// configuration shares it): a queue and the count of lines its writes failed.
+struct Stdout {
+    tx: SyncSender<Vec<u8>>,
+    errors: Arc<AtomicU64>,
+    /// Lines queued and not yet written.
+    pending: Arc<AtomicU64>,
+}
+
+/// Waits, up to `limit`, for the stdout writer to have written every line
+/// queued (at shutdown: a reader that reads gets everything, one that does
+/// not holds the exit back by `limit` only).
+pub fn flush_stdout(limit: std::time::Duration) {
+    let Some(w) = STDOUT.get() else { return };
+    let t0 = std::time::Instant::now();
+    while w.pending.load(Ordering::Acquire) > 0 && t0.elapsed() < limit {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+}
+
+static STDOUT: OnceLock<Stdout> = OnceLock::new();
+
+fn stdout_writer() -> &'static Stdout {
+    STDOUT.get_or_init(|| {
+        let (tx, rx) = sync_channel::<Vec<u8>>(STDOUT_QUEUE);
+        let (errors, pending) = (Arc::new(AtomicU64::new(0)), Arc::new(AtomicU64::new(0)));
+        let (errs, left) = (errors.clone(), pending.clone());
+        // Never joined: at shutdown it may be blocked in a write for good.
+        let spawned = std::thread::Builder::new().name("stdout".into()).spawn(move || {
+            let mut out = std::io::stdout().lock();
+            while let Ok(first) = rx.recv() {
+                // What waits goes out together, flushed once, so that a
+                // reader sees each batch at once.
+                let mut n = 0;
+                for mut line in std::iter::once(first).chain(std::iter::from_fn(|| rx.try_recv().ok())) {
+                    line.push(b'\n');
+                    if out.write_all(&line).is_err() {
+                        errs.fetch_add(1, Ordering::Relaxed);
+                    }
+                    n += 1;
+                }
+                if out.flush().is_err() {
+                    errs.fetch_add(1, Ordering::Relaxed);
+                }
+                left.fetch_sub(n, Ordering::Release);
+            }
+        });
+        if let Err(e) = spawned {
+            tracing::error!("cannot start the stdout writer: {e}");
+        }
+        Stdout { tx, errors, pending }
+    })
 }
 
 pub struct Outputs {
@@ -60,7 +139,14 @@ impl Outputs {
                     },
                     _ => None,
                 };
-                Destination { cfg: c.clone(), socket, sent: 0, errors: 0, last_error_log: f64::NEG_INFINITY }
+                Destination {
+                    cfg: c.clone(),
+                    socket,
+                    sent: 0,
+                    errors: 0,
+                    dropped: 0,
+                    last_error_log: f64::NEG_INFINITY,
+                }
             })
             .collect();
         Outputs {
@@ -106,16 +192,26 @@ impl Outputs {
                 }),
             };
             if d.cfg.kind == "stdout" {
-                let mut out = std::io::stdout().lock();
+                let writer = stdout_writer();
                 for p in payloads.iter() {
-                    let ok = out.write_all(p).and_then(|_| out.write_all(b"\n"));
-                    if ok.is_err() {
-                        d.errors += 1;
-                    } else {
-                        d.sent += 1;
+                    writer.pending.fetch_add(1, Ordering::AcqRel);
+                    let sent = writer.tx.try_send(p.clone());
+                    if sent.is_err() {
+                        writer.pending.fetch_sub(1, Ordering::AcqRel);
+                    }
+                    match sent {
+                        Ok(()) => d.sent += 1,
+                        Err(TrySendError::Full(_)) => d.dropped += 1,
+                        Err(TrySendError::Disconnected(_)) => d.errors += 1,
                     }
                 }
-                let _ = out.flush();
+                if d.dropped > 0 && now - d.last_error_log > 10.0 {
+                    d.last_error_log = now;
+                    tracing::warn!(
+                        dropped = d.dropped,
+                        "stdout output: its reader keeps up too slowly; lines dropped"
+                    );
+                }
                 continue;
             }
             let (Some(sock), Some(addr)) = (&d.socket, d.cfg.address) else {
@@ -123,7 +219,7 @@ impl Outputs {
                 continue;
             };
             for p in payloads.iter() {
-                match sock.send_to(p, addr) {
+                match sock.send(p) {
                     Ok(_) => d.sent += 1,
                     Err(e) => {
                         d.errors += 1;

@@ -3,6 +3,8 @@
 
 use std::path::PathBuf;
 
+pub mod live;
+
 use fuse1090::feed::{parser_for, FeedEvent, InputFormat, RawFrame};
 
 /// Says that the calling test did not check what it is for, and why. The
