@@ -128,6 +128,9 @@ beast_id = "12345"
 kind = "beast_tcp_client"
 address = "127.0.0.1:30005"
 receiver = "nobody"
+[[input]]
+kind = "udp"
+address = "0.0.0.0:0"
 [[output]]
 kind = "udp"
 format = "json"
@@ -141,6 +144,7 @@ format = "json"
             "[[receiver]] 1 (a): beast_id = \"12345\": 16 hex digits or a UUID",
             "[[input]] 1: receiver \"nobody\" is not declared",
             "[[output]] 1: udp needs address",
+            "[[input]] 2: address 0.0.0.0:0: port 0 is no port",
         ] {
             assert!(e.contains(needle), "{needle:?} missing from:\n{e}");
         }

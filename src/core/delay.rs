@@ -26,6 +26,11 @@ const BURST_SIGMAS: f64 = 6.0;
 const MIN_SPREAD_S: f64 = 0.002;
 /// Bursts in a row taken for a lasting change of the delay.
 const RELEARN_AFTER: u32 = 50;
+/// A frame cannot arrive before it was sent: earlier than this (the
+/// propagation difference between two sites is a few milliseconds at the
+/// most) the sample says a clock is wrong (the server's, or the GPS-timed
+/// receiver's), not the link.
+const EARLIEST_S: f64 = -0.005;
 
 /// A receiver's network delay: mean and spread of its frames' arrival after
 /// their time of applicability.
@@ -37,6 +42,8 @@ pub struct DelayCal {
     bursts_in_a_row: u32,
     /// Samples left out as bursts.
     pub bursts: u64,
+    /// Samples left out as impossible: arriving before they were sent.
+    pub impossible: u64,
 }
 
 impl DelayCal {
@@ -45,13 +52,18 @@ impl DelayCal {
         if !delay_s.is_finite() {
             return;
         }
+        if delay_s < EARLIEST_S {
+            self.impossible += 1;
+            return;
+        }
         if self.n >= WARMUP {
             let spread = self.var.sqrt().max(MIN_SPREAD_S);
             if (delay_s - self.mean).abs() > BURST_SIGMAS * spread {
                 self.bursts += 1;
                 self.bursts_in_a_row += 1;
                 if self.bursts_in_a_row >= RELEARN_AFTER {
-                    *self = DelayCal { bursts: self.bursts, ..DelayCal::default() };
+                    *self =
+                        DelayCal { bursts: self.bursts, impossible: self.impossible, ..DelayCal::default() };
                 }
                 return;
             }
@@ -66,9 +78,12 @@ impl DelayCal {
         self.var = (1.0 - w) * (self.var + w * d * d);
     }
 
-    /// (mean, spread) of the delay (s), once learnt.
+    /// (mean, spread) of the delay (s), once learnt. Never negative: the
+    /// samples a little below zero are the two sites' propagation
+    /// difference, and dating a report after its arrival would put it in
+    /// the future.
     pub fn estimate(&self) -> Option<(f64, f64)> {
-        (self.n >= WARMUP).then(|| (self.mean, self.var.sqrt()))
+        (self.n >= WARMUP).then(|| (self.mean.max(0.0), self.var.sqrt()))
     }
 
     /// Transmissions learnt from since the last (re)start.
@@ -110,5 +125,22 @@ mod tests {
         assert!((mean - 0.120).abs() < 0.003, "{mean}");
         cal.push(f64::NAN);
         assert!(cal.estimate().unwrap().0.is_finite());
+    }
+
+    /// A server clock a second fast (or a GPS receiver a second slow) makes
+    /// every frame seem to arrive before it was sent: nothing is learnt from
+    /// that, and a link a hair faster than the propagation difference is
+    /// taken as no delay, never a negative one.
+    #[test]
+    fn arrivals_before_the_transmission_are_not_a_delay() {
+        let mut cal = DelayCal::default();
+        for _ in 0..100 {
+            cal.push(-1.0);
+        }
+        assert_eq!((cal.estimate(), cal.impossible), (None, 100));
+        for k in 0..100 {
+            cal.push(-0.001 + 1e-5 * (k % 3) as f64);
+        }
+        assert_eq!(cal.estimate().map(|e| e.0), Some(0.0));
     }
 }

@@ -160,6 +160,7 @@ impl BeastParser {
     #[inline]
     fn emit<F: FnMut(FeedEvent)>(&mut self, ty: u8, body: &[u8], sink: &mut F) {
         match ty {
+            b'1' if body.iter().all(|&b| b == 0) => self.stats.heartbeats += 1,
             b'1' | b'2' | b'3' => {
                 let ts = body[..6].iter().fold(0u64, |acc, &b| (acc << 8) | b as u64);
                 if let Some(frame) = RawFrame::new(&body[7..], ts, body[6]) {

@@ -505,6 +505,10 @@ impl<W: Write> CaptureWriter<W> {
     pub fn into_inner(self) -> W {
         self.out
     }
+
+    pub fn get_ref(&self) -> &W {
+        &self.out
+    }
 }
 
 #[cfg(test)]

@@ -116,6 +116,9 @@ pub struct FeedStats {
     pub skipped_frames: u64,
     /// Incomplete frames at the end of a datagram or of the input.
     pub truncated_frames: u64,
+    /// Keep-alive frames of an idle readsb/dump1090 Beast port (a Mode A/C
+    /// frame of zeros, timestamp and signal zero too): not frames.
+    pub heartbeats: u64,
 }
 
 impl FeedStats {
@@ -123,9 +126,10 @@ impl FeedStats {
         self.mode_ac + self.mode_s_short + self.mode_s_long
     }
 
-    /// Input that did not become a frame: garbage bytes, broken and truncated frames.
+    /// Frames that did not become frames: broken and truncated ones
+    /// (garbage between frames is counted in bytes, `garbage_bytes`).
     pub fn input_errors(&self) -> u64 {
-        self.garbage_bytes + self.broken_frames + self.truncated_frames
+        self.broken_frames + self.truncated_frames
     }
 
     pub(crate) fn count_frame(&mut self, frame: &RawFrame) {

@@ -13,6 +13,12 @@ use crate::feed::capture::{ClockKind, ReceiverDecl};
 pub struct ServiceConfig {
     /// Record every frame received to this capture file (v1), for replay; empty: off.
     pub record: String,
+    /// The recording is rotated (`FILE` → `FILE.1` ...) at this size (bytes) ...
+    pub record_max_bytes: u64,
+    /// ... or this age (s), whichever comes first ...
+    pub record_max_age_s: f64,
+    /// ... keeping this many rotated files beside the current one.
+    pub record_keep: usize,
     /// One stats line in the log this often (s).
     pub stats_interval_s: f64,
     /// Prometheus text endpoint (host:port); empty: off.
@@ -38,6 +44,9 @@ impl Default for ServiceConfig {
     fn default() -> Self {
         ServiceConfig {
             record: String::new(),
+            record_max_bytes: 1 << 30,
+            record_max_age_s: 3600.0,
+            record_keep: 8,
             stats_interval_s: 60.0,
             metrics_listen: String::new(),
             sac: 0,
@@ -250,14 +259,26 @@ pub fn validate(
     if !(service.stats_interval_s > 0.0 && service.stats_interval_s.is_finite()) {
         errs.push(format!("[service] stats_interval_s = {} must be positive", service.stats_interval_s));
     }
-    if !service.metrics_listen.is_empty() && service.metrics_listen.parse::<SocketAddr>().is_err() {
-        errs.push(format!("[service] metrics_listen = {:?} is not host:port", service.metrics_listen));
+    match service.metrics_listen.parse::<SocketAddr>() {
+        _ if service.metrics_listen.is_empty() => {}
+        Err(_) => {
+            errs.push(format!("[service] metrics_listen = {:?} is not host:port", service.metrics_listen))
+        }
+        // Port 0 would listen on a port the kernel picks and nobody knows.
+        Ok(a) if a.port() == 0 => errs.push("[service] metrics_listen: port 0 is no port".into()),
+        Ok(_) => {}
     }
     if !(64..=65_000).contains(&service.max_datagram_bytes) {
         errs.push(format!(
             "[service] max_datagram_bytes = {} must be in 64..=65000",
             service.max_datagram_bytes
         ));
+    }
+    if service.record_max_bytes < 4096 {
+        errs.push(format!("[service] record_max_bytes = {} must be at least 4096", service.record_max_bytes));
+    }
+    if !(service.record_max_age_s >= 1.0 && service.record_max_age_s.is_finite()) {
+        errs.push(format!("[service] record_max_age_s = {} must be at least 1", service.record_max_age_s));
     }
     if service.queue_frames == 0 {
         errs.push("[service] queue_frames must be positive".into());
@@ -314,6 +335,9 @@ pub fn validate(
                 errs.push(format!("{at}: receivers: {id:?} is not declared"));
             }
         }
+        if input.address.port() == 0 {
+            errs.push(format!("{at}: address {}: port 0 is no port", input.address));
+        }
         if !(input.idle_timeout_s >= 0.0 && input.idle_timeout_s.is_finite()) {
             errs.push(format!("{at}: idle_timeout_s = {} must be zero or positive", input.idle_timeout_s));
         }
@@ -330,6 +354,9 @@ pub fn validate(
             "udp" if o.address.is_none() => errs.push(format!("{at}: udp needs address")),
             "udp" | "stdout" => {}
             k => errs.push(format!("{at}: kind = {k:?}: udp or stdout")),
+        }
+        if o.address.is_some_and(|a| a.port() == 0) {
+            errs.push(format!("{at}: address: port 0 is no port"));
         }
         if o.kind == "stdout" && o.format != OutputFormat::Json {
             errs.push(format!("{at}: stdout prints json only"));

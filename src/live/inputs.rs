@@ -29,6 +29,7 @@ use tokio::net::{TcpListener, TcpStream, UdpSocket};
 
 use super::admit::{Admission, Refusal};
 use super::config::{BeastId, InputConfig, InputKind, ReceiverConfig};
+use super::loglimit::LogGate;
 use super::ToCore;
 use crate::feed::{parser_for, FeedEvent, FrameParser, InputFormat, RawFrame};
 
@@ -41,11 +42,18 @@ use crate::feed::{parser_for, FeedEvent, FrameParser, InputFormat, RawFrame};
 pub struct RxCounters {
     pub frames: AtomicU64,
     pub bytes: AtomicU64,
+    /// Frames broken or cut off (at a datagram's end, or a connection's).
     pub input_errors: AtomicU64,
+    /// Bytes between frames that belonged to none.
+    pub garbage_bytes: AtomicU64,
+    /// Keep-alive frames of an idle Beast port: neither frames nor errors.
+    pub heartbeats: AtomicU64,
     pub queue_drops: AtomicU64,
     pub throttled: AtomicU64,
     pub over_share: AtomicU64,
     pub admission: Admission,
+    /// Its connect and disconnect lines (a reconnect storm is one line in ten seconds).
+    pub connection_log: LogGate,
     pub connects: AtomicU64,
     pub disconnects: AtomicU64,
 }
@@ -127,6 +135,11 @@ impl Registry {
         self.receivers.read().expect("registry")[rx].1.clone()
     }
 
+    /// A receiver's configured id, for the log.
+    fn id(&self, rx: usize) -> String {
+        self.receivers.read().expect("registry")[rx].0.id.clone()
+    }
+
     /// Counts a failed accept or read, logs it (the first of each power of
     /// two), and waits before the next try: an error that persists (no file
     /// descriptors left while receivers hold connections open) must not
@@ -200,11 +213,12 @@ fn forward(
     }
 }
 
-/// The frames a parser made of a read's bytes or a whole datagram, its
-/// input errors counted.
+/// The frames a parser made of a read's bytes or a whole datagram (or, with
+/// no bytes and not a datagram, what the end of a stream leaves: a frame
+/// cut off is an error), its errors, garbage and heartbeats counted.
 fn frames_of(parser: &mut dyn FrameParser, bytes: &[u8], datagram: bool, c: &RxCounters) -> Vec<RawFrame> {
     let mut frames = Vec::new();
-    let before = parser.stats().input_errors();
+    let before = *parser.stats();
     let mut sink = |ev| {
         if let FeedEvent::Frame(f) = ev {
             frames.push(f)
@@ -212,10 +226,15 @@ fn frames_of(parser: &mut dyn FrameParser, bytes: &[u8], datagram: bool, c: &RxC
     };
     if datagram {
         parser.push_datagram(bytes, &mut sink);
+    } else if bytes.is_empty() {
+        parser.finish(&mut sink);
     } else {
         parser.push(bytes, &mut sink);
     }
-    c.input_errors.fetch_add(parser.stats().input_errors() - before, Ordering::Relaxed);
+    let after = parser.stats();
+    c.input_errors.fetch_add(after.input_errors() - before.input_errors(), Ordering::Relaxed);
+    c.garbage_bytes.fetch_add(after.garbage_bytes - before.garbage_bytes, Ordering::Relaxed);
+    c.heartbeats.fetch_add(after.heartbeats - before.heartbeats, Ordering::Relaxed);
     frames
 }
 
@@ -244,18 +263,23 @@ async fn stream(
     let mut buf = vec![0u8; 64 * 1024];
     loop {
         let read = sock.async_io(Interest::READABLE, || super::stamp::recv(&sock, &mut buf));
-        let (n, _, arrival) = match idle {
-            Some(idle) => tokio::time::timeout(idle, read).await.map_err(|_| {
-                std::io::Error::new(
+        let got = match idle {
+            Some(idle) => tokio::time::timeout(idle, read).await.unwrap_or_else(|_| {
+                Err(std::io::Error::new(
                     std::io::ErrorKind::TimedOut,
                     format!("nothing received for {} s", input.idle_timeout_s),
-                )
-            })??,
-            None => read.await?,
+                ))
+            }),
+            None => read.await,
         };
-        if n == 0 {
-            return Ok(());
-        }
+        let (n, arrival) = match got {
+            Ok((n, _, arrival)) if n > 0 => (n, arrival),
+            end => {
+                // The end, by either side: a frame it cut off is an error.
+                frames_of(parser.as_mut(), &[], false, &c);
+                return end.map(drop);
+            }
+        };
         c.bytes.fetch_add(n as u64, Ordering::Relaxed);
         let frames = frames_of(parser.as_mut(), &buf[..n], false, &c);
         forward(tx, reg, &c, rx, arrival, frames);
@@ -321,16 +345,25 @@ async fn tcp_client(input: &InputConfig, tx: &SyncSender<ToCore>, reg: &Registry
     loop {
         match tokio::time::timeout(Duration::from_secs(5), TcpStream::connect(input.address)).await {
             Ok(Ok(sock)) => {
-                failures = 0;
                 c.connects.fetch_add(1, Ordering::Relaxed);
-                tracing::info!(receiver = id, address = %input.address, "connected");
+                let since = std::time::Instant::now();
+                if let Some(held) = c.connection_log.pass(super::unix_now()) {
+                    tracing::info!(receiver = id, address = %input.address, held_back = held, "connected");
+                }
                 let r = stream(sock, parser_for(InputFormat::Beast), input, tx, reg, rx).await;
                 c.disconnects.fetch_add(1, Ordering::Relaxed);
-                tracing::warn!(
-                    receiver = id,
-                    "disconnected: {}",
-                    r.err().map_or("end of stream".into(), |e| e.to_string())
-                );
+                // A peer that accepts and closes at once is a failure too:
+                // backing off only from failed connects, a client would
+                // reconnect to it twice a second for ever.
+                failures = if since.elapsed() >= Duration::from_secs(LASTING_S) { 0 } else { failures + 1 };
+                if let Some(held) = c.connection_log.pass(super::unix_now()) {
+                    tracing::warn!(
+                        receiver = id,
+                        held_back = held,
+                        "disconnected: {}",
+                        r.err().map_or("end of stream".into(), |e| e.to_string())
+                    );
+                }
             }
             Ok(Err(e)) => {
                 if failures == 0 {
@@ -346,6 +379,10 @@ async fn tcp_client(input: &InputConfig, tx: &SyncSender<ToCore>, reg: &Registry
         tokio::time::sleep(Duration::from_secs_f64(wait)).await;
     }
 }
+
+/// A connection that lasted this long (s) was a success: the client's
+/// backoff starts again from its shortest.
+const LASTING_S: u64 = 10;
 
 async fn tcp_server(
     input: &InputConfig,
@@ -409,12 +446,17 @@ async fn tcp_server(
                 // ended, nobody reads it.
                 older.notify_one();
             }
-            let c = reg.counters(rx);
+            let (c, id) = (reg.counters(rx), reg.id(rx));
             c.connects.fetch_add(1, Ordering::Relaxed);
-            tracing::info!(peer = %peer, receiver = rx, "receiver connected");
+            if let Some(held) = c.connection_log.pass(super::unix_now()) {
+                tracing::info!(peer = %peer, receiver = id, held_back = held, "receiver connected");
+            }
             if let Some((frames, arrival, bytes)) = early {
+                let st = parser.stats();
                 c.bytes.fetch_add(bytes as u64, Ordering::Relaxed);
-                c.input_errors.fetch_add(parser.stats().input_errors(), Ordering::Relaxed);
+                c.input_errors.fetch_add(st.input_errors(), Ordering::Relaxed);
+                c.garbage_bytes.fetch_add(st.garbage_bytes, Ordering::Relaxed);
+                c.heartbeats.fetch_add(st.heartbeats, Ordering::Relaxed);
                 forward(&tx, &reg, &c, rx, arrival, frames);
             }
             let r = tokio::select! {
@@ -422,7 +464,10 @@ async fn tcp_server(
                 _ = stop.notified() => Err(std::io::Error::other("closed: the receiver connected again")),
             };
             c.disconnects.fetch_add(1, Ordering::Relaxed);
-            tracing::warn!(peer = %peer, "receiver disconnected: {}", r.err().map_or("end of stream".into(), |e| e.to_string()));
+            if let Some(held) = c.connection_log.pass(super::unix_now()) {
+                let why = r.err().map_or("end of stream".into(), |e| e.to_string());
+                tracing::warn!(peer = %peer, receiver = id, held_back = held, "receiver disconnected: {why}");
+            }
         });
     }
 }

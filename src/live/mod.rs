@@ -15,7 +15,9 @@
 pub mod admit;
 pub mod config;
 pub mod inputs;
+pub mod loglimit;
 pub mod outputs;
+pub mod record;
 pub mod replay;
 pub mod stamp;
 
@@ -29,11 +31,12 @@ use anyhow::{Context, Result};
 
 use crate::config::Config;
 use crate::core::{Back, Cmd, Core, CoreStats, Event, Front};
-use crate::feed::capture::{CaptureWriter, ReceiverDecl};
+use crate::feed::capture::ReceiverDecl;
 use crate::feed::RawFrame;
 use config::InputConfig;
 use inputs::Registry;
 use outputs::Outputs;
+use record::Recorder;
 
 /// Most frames handled between two publications. A batch is whatever is
 /// queued up to this, so under light load it is a frame or a few; under
@@ -160,15 +163,18 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
     let outputs = Outputs::new(&cfg.output, &cfg.service);
     let recorder = match cfg.service.record.as_str() {
         "" => None,
-        p => Some(
-            CaptureWriter::new(
-                std::io::BufWriter::new(
-                    std::fs::File::create(p).with_context(|| format!("cannot create the recording {p}"))?,
-                ),
-                "fuse1090 live recording",
+        p => {
+            let limits = record::RecordLimits {
+                path: p.into(),
+                max_bytes: cfg.service.record_max_bytes,
+                max_age_s: cfg.service.record_max_age_s,
+                keep: cfg.service.record_keep,
+            };
+            Some(
+                Recorder::open(limits, unix_now())
+                    .with_context(|| format!("cannot create the recording {p}"))?,
             )
-            .with_context(|| format!("writing {p}"))?,
-        ),
+        }
     };
     let stats_every = cfg.service.stats_interval_s;
     // Every port bound before anything runs: one that is taken (another
@@ -298,7 +304,7 @@ fn core_loop(
     cfg: crate::core::CoreConfig,
     decls: Vec<ReceiverDecl>,
     outputs: Outputs,
-    mut recorder: Option<CaptureWriter<std::io::BufWriter<std::fs::File>>>,
+    mut recorder: Option<Recorder>,
     rx: Receiver<ToCore>,
     registry: Arc<Registry>,
     stats_every: f64,
@@ -307,7 +313,7 @@ fn core_loop(
     let mut cmds = Vec::new();
     for d in decls {
         if let Some(r) = &mut recorder {
-            let _ = r.receiver(&d);
+            r.receiver(&d, unix_now());
         }
         front.add_receiver(d, &mut cmds);
     }
@@ -360,7 +366,7 @@ fn core_loop(
                     from.admission.queued.fetch_sub(frames.len(), Ordering::Relaxed);
                     for frame in &frames {
                         if let Some(w) = &mut recorder {
-                            let _ = w.frame(arrival, r, frame);
+                            w.frame(arrival, r, frame);
                         }
                         front.on_frame(r, arrival, frame, &mut cmds);
                     }
@@ -371,7 +377,7 @@ fn core_loop(
                 ToCore::AddReceiver(d) => {
                     n += 1;
                     if let Some(w) = &mut recorder {
-                        let _ = w.receiver(&d);
+                        w.receiver(&d, unix_now());
                     }
                     front.add_receiver(d, &mut cmds);
                 }
@@ -393,6 +399,9 @@ fn core_loop(
         if now >= next_delay_metrics {
             next_delay_metrics = now + 1.0;
             delay_metrics(&front, &mut announced);
+            if let Some(r) = &recorder {
+                record_metrics(&r.stats);
+            }
             for (id, n) in front.late_copies() {
                 metrics::counter!("fuse1090_receiver_late_copies_total", "receiver" => id.to_string())
                     .absolute(n);
@@ -431,8 +440,16 @@ fn core_loop(
         tracing::error!("the tracker thread panicked");
     }
     if let Some(w) = recorder {
-        let _ = w.into_inner().into_inner().map(|f| f.sync_all());
+        w.finish();
     }
+}
+
+/// What the recording wrote and could not write.
+fn record_metrics(s: &record::RecordStats) {
+    metrics::counter!("fuse1090_record_frames_total").absolute(s.frames);
+    metrics::counter!("fuse1090_record_dropped_frames_total").absolute(s.dropped);
+    metrics::counter!("fuse1090_record_write_errors_total").absolute(s.write_errors);
+    metrics::counter!("fuse1090_record_rotations_total").absolute(s.rotations);
 }
 
 /// The network delays learnt for receivers whose reports are dated by
@@ -571,6 +588,10 @@ fn metrics(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outputs
             .absolute(c.frames.load(Ordering::Relaxed));
         metrics::counter!("fuse1090_receiver_input_errors_total", "receiver" => id.clone())
             .absolute(c.input_errors.load(Ordering::Relaxed));
+        metrics::counter!("fuse1090_receiver_garbage_bytes_total", "receiver" => id.clone())
+            .absolute(c.garbage_bytes.load(Ordering::Relaxed));
+        metrics::counter!("fuse1090_receiver_heartbeats_total", "receiver" => id.clone())
+            .absolute(c.heartbeats.load(Ordering::Relaxed));
         metrics::counter!("fuse1090_receiver_throttled_total", "receiver" => id.clone())
             .absolute(c.throttled.load(Ordering::Relaxed));
         metrics::counter!("fuse1090_receiver_over_share_total", "receiver" => id.clone())
