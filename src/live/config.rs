@@ -80,6 +80,11 @@ pub struct ReceiverConfig {
     /// 36-character UUID.
     #[serde(default)]
     pub beast_id: Option<String>,
+    /// Whether a connection naming it by `beast_id` may close its live
+    /// connection from another source address (a receiver behind a
+    /// changing address). Off: anyone who knows the id could take it over.
+    #[serde(default)]
+    pub beast_id_takeover: bool,
     /// Most frames per second accepted from it; more are dropped and counted (0: no limit).
     #[serde(default)]
     pub max_rate: f64,
@@ -138,6 +143,22 @@ impl ReceiverConfig {
     /// Its `beast_id` parsed (`None` when absent or, before validation, malformed).
     pub fn beast_name(&self) -> Option<BeastId> {
         self.beast_id.as_deref().and_then(BeastId::parse)
+    }
+
+    /// A receiver at 0,0 with a counter clock, known by `beast_id` only.
+    #[cfg(test)]
+    pub fn for_test(id: &str, beast_id: Option<&str>) -> ReceiverConfig {
+        ReceiverConfig {
+            id: id.into(),
+            lat: 0.0,
+            lon: 0.0,
+            alt_m: 0.0,
+            clock: "beast12".into(),
+            source: None,
+            beast_id: beast_id.map(Into::into),
+            beast_id_takeover: false,
+            max_rate: 0.0,
+        }
     }
 
     pub fn decl(&self) -> ReceiverDecl {

@@ -16,9 +16,12 @@ pub mod admit;
 pub mod config;
 pub mod inputs;
 pub mod loglimit;
+pub mod metrics_http;
 pub mod outputs;
 pub mod record;
+pub mod registry;
 pub mod replay;
+pub mod server;
 pub mod stamp;
 
 use std::path::{Path, PathBuf};
@@ -142,15 +145,20 @@ fn realtime(priority: u8) -> std::io::Result<()> {
 }
 
 async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
+    let registry = Arc::new(Registry { queue_frames: cfg.service.queue_frames, ..Default::default() });
+    let mut metrics_task = None;
     if !cfg.service.metrics_listen.is_empty() {
         let addr: std::net::SocketAddr = cfg.service.metrics_listen.parse().context("metrics_listen")?;
-        metrics_exporter_prometheus::PrometheusBuilder::new()
-            .with_http_listener(addr)
-            .install()
-            .context("cannot start the Prometheus endpoint")?;
+        let listener = tokio::net::TcpListener::bind(addr)
+            .await
+            .with_context(|| format!("the Prometheus endpoint cannot bind {addr}"))?;
+        let handle = metrics_exporter_prometheus::PrometheusBuilder::new()
+            .install_recorder()
+            .context("cannot start the Prometheus recorder")?;
+        metrics_task =
+            Some(tokio::spawn(metrics_http::serve(listener, handle, registry.metrics_http.clone())));
         tracing::info!(address = %addr, "Prometheus metrics");
     }
-    let registry = Arc::new(Registry { queue_frames: cfg.service.queue_frames, ..Default::default() });
     // Every message holds a frame or more: the frames' bound bites first.
     let (tx, rx) = sync_channel::<ToCore>(cfg.service.queue_frames);
     let mut core_cfg = cfg.core.clone();
@@ -220,16 +228,11 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
             _ = hup.recv() => {
                 match Config::load(&path) {
                     Ok(new) => {
-                        for r in &new.receiver {
-                            if registry.index_of(&r.id).is_none() {
-                                registry.add(r.clone());
-                                let _ = tx.send(ToCore::AddReceiver(r.decl()));
-                            } else {
-                                // Same index, new settings (source, rate).
-                                registry.update(r);
-                            }
+                        // New receivers added, known ones updated in
+                        // place, removed ones revoked (their connections closed).
+                        for r in registry.reconfigure(&new.receiver) {
+                            let _ = tx.send(ToCore::AddReceiver(r.decl()));
                         }
-                        registry.generation.fetch_add(1, Ordering::Relaxed);
                         // Logged once the receivers are in place (tests wait for it).
                         tracing::info!("SIGHUP: configuration re-read");
                         let _ = tx.send(ToCore::Outputs(Outputs::new(&new.output, &new.service)));
@@ -266,7 +269,7 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
         }
     }
     tracing::info!("stopping");
-    for t in tasks {
+    for t in tasks.into_iter().chain(metrics_task) {
         t.abort();
     }
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
@@ -578,6 +581,12 @@ fn metrics(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outputs
     metrics::counter!("fuse1090_unknown_senders_total").absolute(reg.unknown_senders.load(Ordering::Relaxed));
     metrics::counter!("fuse1090_socket_errors_total").absolute(reg.socket_errors.load(Ordering::Relaxed));
     metrics::counter!("fuse1090_queue_drops_total").absolute(reg.queue_drops.load(Ordering::Relaxed));
+    let http = &reg.metrics_http;
+    metrics::counter!("fuse1090_metrics_http_refused_total").absolute(http.refused.load(Ordering::Relaxed));
+    metrics::counter!("fuse1090_metrics_http_timed_out_total")
+        .absolute(http.timed_out.load(Ordering::Relaxed));
+    metrics::counter!("fuse1090_metrics_http_accept_errors_total")
+        .absolute(http.accept_errors.load(Ordering::Relaxed));
     // Datagrams lost in the kernel, the UDP inputs' buffers full.
     metrics::counter!("fuse1090_udp_kernel_drops_total").absolute(reg.kernel_drops.load(Ordering::Relaxed));
     // Frames waiting for the core: it fills before anything is dropped.
