@@ -175,6 +175,7 @@ impl Front {
             self.next_sweep = now + 1.0;
             let drop = self.drop_after_s;
             self.watched.retain(|_, w| now - w.last_heard <= drop);
+            self.mlat.prune(now);
         }
         // The tracker is told the time at most once a millisecond (and with
         // every measurement, which carries its own): frames arrive a hundred

@@ -77,15 +77,25 @@ pub async fn serve(listener: TcpListener, handle: PrometheusHandle, counters: Ar
         active.fetch_add(1, Ordering::Relaxed);
         let (handle, active, counters) = (handle.clone(), active.clone(), counters.clone());
         tokio::spawn(async move {
-            let service = hyper::service::service_fn(move |req| answer(req, handle.clone()));
-            let conn = hyper::server::conn::http1::Builder::new()
-                .timer(TokioTimer::new())
-                .header_read_timeout(HEADER_TIMEOUT)
-                .serve_connection(TokioIo::new(sock), service);
-            if tokio::time::timeout(LIFETIME, conn).await.is_err() {
+            if tokio::time::timeout(LIFETIME, connection(sock, handle)).await.is_err() {
                 counters.timed_out.fetch_add(1, Ordering::Relaxed);
             }
             active.fetch_sub(1, Ordering::Relaxed);
         });
     }
+}
+
+/// Serves one connection (any byte stream: the fuzz target hands it one in
+/// memory) until it ends; malformed requests get hyper's 400 and the end.
+pub async fn connection<S>(io: S, handle: PrometheusHandle)
+where
+    S: tokio::io::AsyncRead + tokio::io::AsyncWrite + Unpin + Send + 'static,
+{
+    let service = hyper::service::service_fn(move |req| answer(req, handle.clone()));
+    let _ = hyper::server::conn::http1::Builder::new()
+        .timer(TokioTimer::new())
+        .header_read_timeout(HEADER_TIMEOUT)
+        .max_buf_size(16 * 1024)
+        .serve_connection(TokioIo::new(io), service)
+        .await;
 }

@@ -194,6 +194,10 @@ const CAL_MEMORY: f64 = 200.0;
 /// A receiver clock that disagrees with the server's clock by more than this
 /// (s) between two frames has jumped. Network delays vary by far less.
 const CLOCK_JUMP_S: f64 = 5.0;
+/// How long an aircraft's MLAT state outlives its last use, and a banned
+/// sync source's (a spoofer that pauses does not become honest).
+pub const AIRCRAFT_TTL_S: f64 = 600.0;
+pub const BANNED_TTL_S: f64 = 86_400.0;
 /// Mean normalised innovation beyond which an aircraft is no longer a sync
 /// source (honest ones average about 1).
 const SYNC_SOURCE_MAX_NIS: f64 = 6.0;
@@ -449,6 +453,26 @@ impl Mlat {
 
     fn reject(&mut self, why: Reject) {
         *self.stats.rejects.entry(why.name()).or_default() += 1;
+    }
+
+    /// Forgets aircraft not heard of for [`AIRCRAFT_TTL_S`] (a banned sync
+    /// source for [`BANNED_TTL_S`]): over weeks the table would otherwise
+    /// hold every address ever heard. Nothing older than a few minutes is
+    /// used anyway (altitudes, fixes and attempts are read within seconds).
+    pub fn prune(&mut self, now: f64) {
+        self.aircraft.retain(|_, a| {
+            let newest = [a.alt_ft.map(|x| x.1), a.last_fix.map(|x| x.1), a.last_tried, a.last_adsb]
+                .into_iter()
+                .flatten()
+                .fold(f64::NEG_INFINITY, f64::max);
+            let ttl = if a.sync_banned { BANNED_TTL_S } else { AIRCRAFT_TTL_S };
+            now - newest <= ttl
+        });
+    }
+
+    /// Aircraft in the table (for tests and the soak check).
+    pub fn aircraft_count(&self) -> usize {
+        self.aircraft.len()
     }
 
     /// A complete group at server time `now`.
@@ -1085,5 +1109,25 @@ mod tests {
         assert!(back < out + 400, "readmitted at {back}");
         assert!(m.stats.excluded_receiver_copies > 0);
         assert!(last_fix_used_it, "back in the fixes");
+    }
+
+    #[test]
+    fn aircraft_are_forgotten_once_unheard_for_their_time_to_live() {
+        let (mut m, rxs) = engine();
+        let target = geodetic_to_ecef(48.75, 2.40, 30_000.0 * FT_TO_M);
+        let t = 1_700_000_000.0;
+        for k in 0..50u32 {
+            let mut g = group(&rxs, target, t + k as f64);
+            g.info.addr = 0x100000 + k;
+            m.on_group(&g, t + k as f64);
+        }
+        assert_eq!(m.aircraft_count(), 50);
+        m.prune(t + 49.0 + AIRCRAFT_TTL_S - 9.5);
+        assert_eq!(m.aircraft_count(), 10, "the last ten heard within the time to live");
+        m.aircraft.get_mut(&0x100031).unwrap().sync_banned = true;
+        m.prune(t + 49.0 + AIRCRAFT_TTL_S + 1.0);
+        assert_eq!(m.aircraft_count(), 1, "a banned sync source is remembered longer");
+        m.prune(t + 49.0 + BANNED_TTL_S + 1.0);
+        assert_eq!(m.aircraft_count(), 0);
     }
 }
