@@ -97,6 +97,14 @@ enum Command {
     },
     /// Validate a configuration: exit 0, or print every problem with its location.
     CheckConfig { file: PathBuf },
+    /// Print a systemd drop-in that limits the service's sockets and peers
+    /// to those the configuration names (see systemd/README or the README).
+    UnitLimits {
+        file: PathBuf,
+        /// A further address the service may talk to (e.g. a Prometheus server).
+        #[arg(long)]
+        allow: Vec<std::net::IpAddr>,
+    },
 }
 
 fn main() -> ExitCode {
@@ -118,6 +126,7 @@ fn main() -> ExitCode {
         Command::Sim { scenario, out } => cmd::sim::run(&scenario, &out),
         Command::Replay { capture, config, speed } => cmd::replay::run(&capture, &config, speed),
         Command::CheckConfig { file } => cmd::check_config(&file),
+        Command::UnitLimits { file, allow } => cmd::unit_limits::run(&file, &allow),
         Command::Eval { truth, tracks, scenario, seeds, config, json } => match (seeds, truth, tracks) {
             (Some(n), _, _) => cmd::eval::monte_carlo(scenario.as_deref(), n, config.as_deref(), json),
             (None, Some(truth), Some(tracks)) => cmd::eval::run(&truth, &tracks, scenario.as_deref(), json),

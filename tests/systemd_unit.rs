@@ -220,3 +220,35 @@ fn the_daemon_makes_no_call_the_units_filter_refuses() {
     eprintln!("the daemon made {} distinct system calls", calls.len());
     assert!(refused.is_empty(), "the unit's filter refuses {refused:?} (all: {calls:?})");
 }
+
+/// The unit and the drop-in `fuse1090 unit-limits` writes for the demo pass
+/// `systemd-analyze verify` without a complaint (it only warns about an
+/// assignment it cannot parse, so its words are read, not its status).
+#[test]
+fn the_unit_and_its_generated_limits_verify_cleanly() {
+    if Command::new("systemd-analyze").arg("--version").output().map_or(true, |o| !o.status.success()) {
+        common::skipped("systemd-analyze not available; the unit not verified");
+        return;
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let work = common::scratch("unit-verify");
+    let dir = work.path();
+    let bin = env!("CARGO_BIN_EXE_fuse1090");
+    let unit = std::fs::read_to_string(root.join("systemd/fuse1090.service")).unwrap();
+    std::fs::write(dir.join("fuse1090.service"), unit.replace("/usr/local/bin/fuse1090", bin)).unwrap();
+    std::fs::create_dir(dir.join("fuse1090.service.d")).unwrap();
+    let limits = Command::new(bin).args(["unit-limits"]).arg(root.join("config/demo.toml")).output().unwrap();
+    assert!(limits.status.success());
+    let text = String::from_utf8(limits.stdout).unwrap();
+    assert!(text.contains("SocketBindDeny=any") && text.contains("IPAddressDeny=any"), "{text}");
+    std::fs::write(dir.join("fuse1090.service.d/limits.conf"), &text).unwrap();
+    let out = Command::new("systemd-analyze")
+        .args(["verify", "fuse1090.service"])
+        .current_dir(dir)
+        .env("SYSTEMD_UNIT_PATH", format!("{}:", dir.display()))
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stderr).to_string() + &String::from_utf8_lossy(&out.stdout);
+    let complaints: Vec<&str> = said.lines().filter(|l| l.contains("fuse1090.service")).collect();
+    assert!(complaints.is_empty(), "systemd-analyze verify:\n{said}");
+}

@@ -6,6 +6,7 @@ pub mod eval;
 pub mod replay;
 pub mod run;
 pub mod sim;
+pub mod unit_limits;
 
 /// Writes to stdout; a reader that went away (`| head`) is not an error.
 pub fn print_stdout(text: &str) -> anyhow::Result<()> {

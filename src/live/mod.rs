@@ -226,45 +226,25 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
             _ = term.recv() => break,
             _ = tokio::signal::ctrl_c() => break,
             _ = hup.recv() => {
-                match Config::load(&path) {
+                // systemd shows the state of a reload (`systemctl status`);
+                // the unit's ExecReload checks the file first, so a
+                // configuration refused fails `systemctl reload` itself.
+                let _ = sd_notify::notify(&[sd_notify::NotifyState::Reloading]);
+                let status = match Config::load(&path) {
                     Ok(new) => {
-                        // New receivers added, known ones updated in
-                        // place, removed ones revoked (their connections closed).
-                        for r in registry.reconfigure(&new.receiver) {
-                            let _ = tx.send(ToCore::AddReceiver(r.decl()));
-                        }
-                        // Logged once the receivers are in place (tests wait for it).
-                        tracing::info!("SIGHUP: configuration re-read");
-                        let _ = tx.send(ToCore::Outputs(Outputs::new(&new.output, &new.service)));
-                        if new.input != current.input {
-                            // Closed before the new ones bind the same ports.
-                            for t in tasks.drain(..) {
-                                t.abort();
-                                let _ = t.await;
-                            }
-                            // Each input that binds runs; one that cannot is
-                            // said and left out, the daemon going on with the rest.
-                            let (mut ok, mut bound) = (Vec::new(), Vec::new());
-                            for (n, i) in new.input.iter().enumerate() {
-                                match inputs::bind(i).await {
-                                    Ok(b) => {
-                                        ok.push(i.clone());
-                                        bound.push(b);
-                                    }
-                                    Err(e) => tracing::error!(
-                                        "SIGHUP: input {} ({}) cannot bind {}: {e}; running without it",
-                                        n + 1,
-                                        i.kind.name(),
-                                        i.address
-                                    ),
-                                }
-                            }
-                            tasks = spawn_all(&ok, bound);
-                        }
+                        let left_out = reload(&new, &current, &registry, &tx, &mut tasks, &spawn_all).await;
                         current = new;
+                        match left_out {
+                            0 => "running; configuration re-read".to_string(),
+                            n => format!("running; configuration re-read, {n} input(s) could not bind (see the log)"),
+                        }
                     }
-                    Err(e) => tracing::error!("SIGHUP: configuration refused, keeping the old one:\n{e:#}"),
-                }
+                    Err(e) => {
+                        tracing::error!("SIGHUP: configuration refused, keeping the old one:\n{e:#}");
+                        "running on the old configuration: the new one was refused (see the log)".to_string()
+                    }
+                };
+                let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready, sd_notify::NotifyState::Status(&status)]);
             }
         }
     }
@@ -277,6 +257,55 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
     drop(tx);
     let _ = tokio::task::spawn_blocking(move || core_thread.join()).await;
     Ok(())
+}
+
+/// Applies a re-read configuration (SIGHUP): receivers added, updated and
+/// revoked; outputs replaced; inputs, if changed, closed and bound anew.
+/// Returns how many new inputs could not bind (said in the log; the
+/// service goes on without them).
+async fn reload(
+    new: &Config,
+    current: &Config,
+    registry: &Arc<Registry>,
+    tx: &std::sync::mpsc::SyncSender<ToCore>,
+    tasks: &mut Vec<tokio::task::JoinHandle<()>>,
+    spawn_all: &impl Fn(&[InputConfig], Vec<inputs::Bound>) -> Vec<tokio::task::JoinHandle<()>>,
+) -> usize {
+    // New receivers added, known ones updated in place, removed ones
+    // revoked (their connections closed).
+    for r in registry.reconfigure(&new.receiver) {
+        let _ = tx.send(ToCore::AddReceiver(r.decl()));
+    }
+    // Logged once the receivers are in place (tests wait for it).
+    tracing::info!("SIGHUP: configuration re-read");
+    let _ = tx.send(ToCore::Outputs(Outputs::new(&new.output, &new.service)));
+    if new.input == current.input {
+        return 0;
+    }
+    // Closed before the new ones bind the same ports.
+    for t in tasks.drain(..) {
+        t.abort();
+        let _ = t.await;
+    }
+    // Each input that binds runs; one that cannot is said and left out,
+    // the daemon going on with the rest.
+    let (mut ok, mut bound) = (Vec::new(), Vec::new());
+    for (n, i) in new.input.iter().enumerate() {
+        match inputs::bind(i).await {
+            Ok(b) => {
+                ok.push(i.clone());
+                bound.push(b);
+            }
+            Err(e) => tracing::error!(
+                "SIGHUP: input {} ({}) cannot bind {}: {e}; running without it",
+                n + 1,
+                i.kind.name(),
+                i.address
+            ),
+        }
+    }
+    *tasks = spawn_all(&ok, bound);
+    new.input.len() - ok.len()
 }
 
 /// What the front thread tells the back thread: the commands of a batch

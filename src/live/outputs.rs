@@ -52,9 +52,8 @@ fn udp_socket(cfg: &OutputConfig, addr: SocketAddr) -> std::io::Result<UdpSocket
             }
         }
     }
-    let any: SocketAddr =
-        if addr.is_ipv4() { "0.0.0.0:0".parse().unwrap() } else { "[::]:0".parse().unwrap() };
-    s.bind(&any.into())?;
+    // No bind: connect picks the local port, so the unit's SocketBindDeny
+    // (see `fuse1090 unit-limits`) need not allow any.
     s.connect(&addr.into())?;
     s.set_nonblocking(true)?;
     Ok(s.into())
