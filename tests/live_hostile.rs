@@ -11,6 +11,10 @@ use std::time::{Duration, Instant};
 mod common;
 use common::live::*;
 
+/// The flooding tests take a core each: one at a time, so that neither
+/// measures the other's load.
+static HEAVY: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// A receiver's configuration block.
 fn receiver(id: &str, source: &str, extra: &str) -> String {
     format!(
@@ -104,6 +108,7 @@ fn an_output_to_a_closed_port_counts_its_errors() {
 /// nothing at all.
 #[test]
 fn a_udp_flood_costs_the_flooded_receiver_its_excess_only() {
+    let _heavy = HEAVY.lock().unwrap_or_else(|e| e.into_inner());
     let work = common::scratch("hostile-flood");
     let (port, log) = (common::free_port(), work.path().join("log"));
     let cfg = work.path().join("c.toml");
@@ -157,4 +162,140 @@ fn a_udp_flood_costs_the_flooded_receiver_its_excess_only() {
     }
     signal(&daemon, "TERM");
     assert!(exit_within(&mut daemon, Duration::from_secs(5)).is_some_and(|s| s.success()));
+}
+
+/// The Prometheus text's value of `name` (a whole series name, labels
+/// included), or 0.
+fn metric(text: &str, name: &str) -> f64 {
+    text.lines()
+        .find_map(|l| l.strip_prefix(name).and_then(|rest| rest.strip_prefix(' ')))
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or(0.0)
+}
+
+/// The chaos run: the demo's eight honest receivers replayed into the TCP
+/// server while, at once, a rate-limited receiver floods UDP, a stranger
+/// floods UDP, a known receiver floods TCP, hundreds of idle connections
+/// hit the input and the metrics port, the recording's disk is full
+/// (`/dev/full`) and nobody reads stdout; then a reload removes the TCP
+/// flooder. Afterwards: the honest receivers lost nothing, the removed one
+/// is gone, the endpoint still answers, descriptors and memory are bounded,
+/// every event is in a metric, and SIGTERM ends it all.
+#[test]
+fn chaos_costs_the_honest_receivers_nothing_and_every_event_is_counted() {
+    let _heavy = HEAVY.lock().unwrap_or_else(|e| e.into_inner());
+    let work = common::scratch("hostile-chaos");
+    let (port, udp, metrics_port) = (common::free_port(), common::free_port(), common::free_port());
+    let metrics = std::net::SocketAddr::from(([127, 0, 0, 1], metrics_port));
+    let log = work.path().join("log");
+    let cfg = work.path().join("c.toml");
+    let base = demo(port, 10.0, "kind = \"stdout\"\n").replace(
+        "[service]\n",
+        &format!("[service]\nmetrics_listen = \"{metrics}\"\nrecord = \"/dev/full\"\n"),
+    );
+    let udp_input = format!("[[input]]\nkind = \"udp\"\naddress = \"127.0.0.1:{udp}\"\n\n");
+    let full = format!(
+        "{base}\n{}{}{udp_input}",
+        receiver("udpflood", "127.0.3.1", "max_rate = 1000.0"),
+        receiver("tcpflood", "127.0.3.2", "")
+    );
+    std::fs::write(&cfg, &full).unwrap();
+    let mut daemon = Command::new(env!("CARGO_BIN_EXE_fuse1090"))
+        .args(["run", "--config"])
+        .arg(&cfg)
+        .env("RUST_LOG", "info")
+        .stderr(Stdio::from(std::fs::File::create(&log).unwrap()))
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    wait_for_log(&log, "running");
+    let until = Instant::now() + Duration::from_secs(12);
+    let tcp_flooder_closed = std::thread::scope(|s| {
+        s.spawn(|| {
+            while Instant::now() < until {
+                send_frames("127.0.3.1", udp, 40, 100);
+                send_frames("127.0.3.99", udp, 40, 20);
+                std::thread::sleep(Duration::from_millis(3));
+            }
+        });
+        // Idle crowds on the input and the metrics port, held open.
+        let crowd = s.spawn(move || {
+            let mut held = Vec::new();
+            for k in 0..300u32 {
+                let from = std::net::Ipv4Addr::new(127, 0, 6, 1 + (k % 200) as u8);
+                for to in [port, metrics_port] {
+                    let sock =
+                        socket2::Socket::new(socket2::Domain::IPV4, socket2::Type::STREAM, None).unwrap();
+                    let _ = sock.bind(&std::net::SocketAddr::from((from, 0)).into());
+                    let target = std::net::SocketAddr::from(([127, 0, 0, 1], to));
+                    if sock.connect_timeout(&target.into(), Duration::from_millis(200)).is_ok() {
+                        held.push(sock);
+                    }
+                }
+            }
+            std::thread::sleep(Duration::from_secs(3));
+            held.len()
+        });
+        let flood = s.spawn(move || {
+            use std::io::Write;
+            let sock = socket2::Socket::new(socket2::Domain::IPV4, socket2::Type::STREAM, None).unwrap();
+            sock.bind(&std::net::SocketAddr::from(([127, 0, 3, 2], 0)).into()).unwrap();
+            sock.connect(&std::net::SocketAddr::from(([127, 0, 0, 1], port)).into()).unwrap();
+            let mut stream: std::net::TcpStream = sock.into();
+            stream.set_write_timeout(Some(Duration::from_secs(2))).unwrap();
+            let chunk: Vec<u8> = (0..500).flat_map(|_| beast_frame()).collect();
+            while Instant::now() < until {
+                if stream.write_all(&chunk).is_err() {
+                    return true;
+                }
+            }
+            false
+        });
+        // Half way: the TCP flooder is removed from the configuration.
+        std::thread::sleep(Duration::from_secs(5));
+        let without = full.replace(&receiver("tcpflood", "127.0.3.2", ""), "");
+        std::fs::write(&cfg, without).unwrap();
+        signal(&daemon, "HUP");
+        let held = crowd.join().unwrap();
+        assert!(held > 0, "no idle connection held");
+        flood.join().unwrap()
+    });
+    assert!(tcp_flooder_closed, "the removed receiver's connection stayed open");
+    std::thread::sleep(Duration::from_millis(1500));
+    // The endpoint answers after the storm, and says what happened.
+    let text = scrape(metrics);
+    assert!(text.contains("fuse1090_frames_total"), "the metrics endpoint does not answer:\n{text}");
+    for name in [
+        "fuse1090_receiver_throttled_total{receiver=\"udpflood\"}",
+        "fuse1090_unknown_senders_total",
+        "fuse1090_metrics_http_refused_total",
+        "fuse1090_record_write_errors_total",
+        "fuse1090_output_drops_total",
+    ] {
+        assert!(metric(&text, name) > 0.0, "{name} not counted:\n{text}");
+    }
+    // The honest receivers lost nothing, to floods or to anything else.
+    for k in 1..=8 {
+        let c = receiver_counts(&log, &format!("s{k}"));
+        assert!(c[0] > 1000, "s{k}: {}", newest_stats(&log));
+        assert_eq!(c[2..], [0, 0, 0], "s{k} lost frames: {}", newest_stats(&log));
+    }
+    // The removed receiver is gone: nothing counted for it after the reload.
+    let gone = receiver_counts(&log, "tcpflood")[0];
+    std::thread::sleep(Duration::from_millis(600));
+    assert_eq!(receiver_counts(&log, "tcpflood")[0], gone);
+    // Bounded: descriptors (the crowd's are closed) and memory.
+    let pid = daemon.id();
+    let fds = std::fs::read_dir(format!("/proc/{pid}/fd")).map_or(0, |d| d.count());
+    assert!(fds < 100, "{fds} descriptors open");
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
+    let rss_kb: u64 = status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.split_whitespace().next()?.parse().ok())
+        .unwrap_or(0);
+    assert!(rss_kb < 400_000, "resident {rss_kb} kB");
+    signal(&daemon, "TERM");
+    let st = exit_within(&mut daemon, Duration::from_secs(5));
+    assert!(st.is_some_and(|s| s.success()), "{st:?}");
 }
