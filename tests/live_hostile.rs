@@ -37,6 +37,18 @@ fn demo(port: u16, speed: f64, output: &str) -> String {
         + &format!("[[output]]\nformat = \"json\"\n{output}")
 }
 
+/// The daemon on `cfg`, logging to `log`, its stdout a pipe nobody reads.
+fn daemon_unread_stdout(cfg: &Path, log: &Path) -> std::process::Child {
+    Command::new(env!("CARGO_BIN_EXE_fuse1090"))
+        .args(["run", "--config"])
+        .arg(cfg)
+        .env("RUST_LOG", "info")
+        .stderr(Stdio::from(std::fs::File::create(log).unwrap()))
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
 /// Datagrams of `n` Beast frames each from `src` to `port`, `count` times.
 fn send_frames(src: &str, port: u16, n: usize, count: usize) {
     let sock = UdpSocket::bind((src, 0)).unwrap();
@@ -55,14 +67,7 @@ fn an_unread_stdout_stops_nothing() {
     let (port, log) = (common::free_port(), work.path().join("log"));
     let cfg = work.path().join("c.toml");
     std::fs::write(&cfg, demo(port, 20.0, "kind = \"stdout\"\n")).unwrap();
-    let mut daemon = Command::new(env!("CARGO_BIN_EXE_fuse1090"))
-        .args(["run", "--config"])
-        .arg(&cfg)
-        .env("RUST_LOG", "info")
-        .stderr(Stdio::from(std::fs::File::create(&log).unwrap()))
-        .stdout(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut daemon = daemon_unread_stdout(&cfg, &log);
     // The capture's 120 s at 20x: all of it within 6 s, far more lines than
     // the pipe's 64 KiB hold.
     let t0 = Instant::now();
@@ -200,14 +205,7 @@ fn chaos_costs_the_honest_receivers_nothing_and_every_event_is_counted() {
         receiver("tcpflood", "127.0.3.2", "")
     );
     std::fs::write(&cfg, &full).unwrap();
-    let mut daemon = Command::new(env!("CARGO_BIN_EXE_fuse1090"))
-        .args(["run", "--config"])
-        .arg(&cfg)
-        .env("RUST_LOG", "info")
-        .stderr(Stdio::from(std::fs::File::create(&log).unwrap()))
-        .stdout(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut daemon = daemon_unread_stdout(&cfg, &log);
     wait_for_log(&log, "running");
     let until = Instant::now() + Duration::from_secs(12);
     let tcp_flooder_closed = std::thread::scope(|s| {

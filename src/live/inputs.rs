@@ -359,11 +359,7 @@ mod tests {
     use crate::live::config::ReceiverConfig;
     use std::sync::mpsc::sync_channel;
 
-    fn frames(n: usize) -> Vec<RawFrame> {
-        (0..n)
-            .map(|i| RawFrame::new(&[0x5d, 0x4b, 0x1a, 0x2b, 0, 0, i as u8], i as u64, 0).unwrap())
-            .collect()
-    }
+    use crate::feed::test_frames as frames;
 
     #[test]
     fn the_queue_is_bounded_in_frames_and_a_batch_that_does_not_fit_is_counted_whole() {

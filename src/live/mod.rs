@@ -21,6 +21,7 @@ pub mod outputs;
 pub mod record;
 pub mod registry;
 pub mod replay;
+mod report;
 pub mod server;
 pub mod stamp;
 
@@ -33,7 +34,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 
 use crate::config::Config;
-use crate::core::{Back, Cmd, Core, CoreStats, Event, Front};
+use crate::core::{Back, Cmd, Core, Event, Front};
 use crate::feed::capture::ReceiverDecl;
 use crate::feed::RawFrame;
 use config::InputConfig;
@@ -311,19 +312,8 @@ async fn reload(
 /// What the front thread tells the back thread: the commands of a batch
 /// and the time they were made, or new outputs (SIGHUP).
 enum ToBack {
-    Batch { cmds: Vec<Cmd>, now: f64, front: FrontSnapshot },
+    Batch { cmds: Vec<Cmd>, now: f64, front: report::FrontSnapshot },
     Outputs(Outputs),
-}
-
-/// The front stage's counters, sent with each batch for the stats line and
-/// the metrics, which the back thread writes (it knows the tracks).
-#[derive(Clone, Copy, Default)]
-struct FrontSnapshot {
-    stats: CoreStats,
-    aircraft: u64,
-    mlat_fixes: u64,
-    self_synced_fixes: u64,
-    dispatched: u64,
 }
 
 /// Batches between the two stages: bounded, so a stalled tracker stops
@@ -366,7 +356,7 @@ fn core_loop(
     let mut last_ping = Instant::now();
     let mut dispatched = 0u64;
     let (mut next_delay_metrics, mut announced) = (0.0, std::collections::HashSet::new());
-    let snapshot = |front: &Front, dispatched| FrontSnapshot {
+    let snapshot = |front: &Front, dispatched| report::FrontSnapshot {
         stats: *front.stats(),
         aircraft: front.decoder().stats().aircraft_created,
         mlat_fixes: front.mlat().stats.fixes,
@@ -430,26 +420,7 @@ fn core_loop(
         front.advance(now, &mut cmds);
         if now >= next_delay_metrics {
             next_delay_metrics = now + 1.0;
-            delay_metrics(&front, &mut announced);
-            if let Some(r) = &recorder {
-                record_metrics(&r.stats);
-            }
-            for (id, n) in front.late_copies() {
-                metrics::counter!("fuse1090_receiver_late_copies_total", "receiver" => id.to_string())
-                    .absolute(n);
-            }
-            // MLAT exclusion is a state, not a sentence: an excluded receiver
-            // is still synchronised and comes back (gauge 1 while it is out).
-            for (id, h) in front.mlat_health() {
-                let id = id.to_string();
-                metrics::gauge!("fuse1090_receiver_mlat_excluded", "receiver" => id.clone())
-                    .set(h.excluded as u8 as f64);
-                metrics::counter!("fuse1090_receiver_mlat_exclusions_total", "receiver" => id.clone())
-                    .absolute(h.exclusions);
-                metrics::counter!("fuse1090_receiver_clock_resets_total", "receiver" => id.clone())
-                    .absolute(h.clock_resets);
-                metrics::gauge!("fuse1090_receiver_sync_outlier_rate", "receiver" => id).set(h.outlier_rate);
-            }
+            report::front_metrics(&front, recorder.as_ref().map(|r| &r.stats), &mut announced);
         }
         // The next batch's buffer at this one's size: grown from empty, every
         // batch reallocated it several times (malloc and free were 6% of this
@@ -476,32 +447,6 @@ fn core_loop(
     }
 }
 
-/// What the recording wrote and could not write.
-fn record_metrics(s: &record::RecordStats) {
-    metrics::counter!("fuse1090_record_frames_total").absolute(s.frames);
-    metrics::counter!("fuse1090_record_dropped_frames_total").absolute(s.dropped);
-    metrics::counter!("fuse1090_record_write_errors_total").absolute(s.write_errors);
-    metrics::counter!("fuse1090_record_rotations_total").absolute(s.rotations);
-}
-
-/// The network delays learnt for receivers whose reports are dated by
-/// arrival (see `core::delay`): a gauge each, and a log line when a
-/// receiver's is first learnt.
-fn delay_metrics(front: &Front, announced: &mut std::collections::HashSet<String>) {
-    for (id, mean_s, spread_s) in front.learnt_delays() {
-        metrics::gauge!("fuse1090_receiver_network_delay_seconds", "receiver" => id.to_string()).set(mean_s);
-        if !announced.contains(id) {
-            announced.insert(id.to_string());
-            tracing::info!(
-                receiver = id,
-                delay_ms = format!("{:.1}", mean_s * 1e3),
-                spread_ms = format!("{:.1}", spread_s * 1e3),
-                "reports dated by arrival: network delay learnt"
-            );
-        }
-    }
-}
-
 /// The core's back thread: commands in, tracks and alerts out to the
 /// outputs (with the front's events, in order), stats and metrics.
 fn back_loop(
@@ -512,7 +457,7 @@ fn back_loop(
     stats_every: f64,
 ) {
     let mut events: Vec<Event> = Vec::new();
-    let mut front = FrontSnapshot::default();
+    let mut front = report::FrontSnapshot::default();
     let mut next_metrics = 0.0;
     let mut next_stats = unix_now() + stats_every;
     let mut last = unix_now();
@@ -533,126 +478,29 @@ fn back_loop(
         outputs.publish(&events, |i| back.receiver_id(i), now);
         events.clear();
         if now >= next_stats {
-            stats_line(&front, &back, &registry, &outputs, (front.stats.fixes - last_fixes, now - last));
+            report::stats_line(
+                &front,
+                &back,
+                &registry,
+                &outputs,
+                (front.stats.fixes - last_fixes, now - last),
+            );
             next_stats = now + stats_every;
             (last, last_fixes) = (now, front.stats.fixes);
         }
         if now >= next_metrics {
-            metrics(&front, &back, &registry, &outputs);
+            report::metrics(&front, &back, &registry, &outputs);
             next_metrics = now + 1.0;
         }
     }
-    stats_line(&front, &back, &registry, &outputs, (front.stats.fixes - last_fixes, unix_now() - last));
-    outputs::flush_stdout(Duration::from_secs(1));
-}
-
-/// The log's stats line; `(fixes, span_s)`: the fixes made since the last
-/// one and the time since.
-fn stats_line(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outputs, recent: (u64, f64)) {
-    let s = &front.stats;
-    let f = back.fuser().stats();
-    let per_rx: Vec<String> = reg
-        .receivers
-        .read()
-        .expect("registry")
-        .iter()
-        .map(|(r, c)| {
-            format!(
-                "{}={}/{}err/{}drop/{}thr/{}share",
-                r.id,
-                c.frames.load(Ordering::Relaxed),
-                c.input_errors.load(Ordering::Relaxed),
-                c.queue_drops.load(Ordering::Relaxed),
-                c.throttled.load(Ordering::Relaxed),
-                c.over_share.load(Ordering::Relaxed)
-            )
-        })
-        .collect();
-    let out_err: u64 = outputs.dests.iter().map(|d| d.errors()).sum();
-    let out_dropped: u64 = outputs.dests.iter().map(|d| d.dropped).sum();
-    tracing::info!(
-        "stats: frames {} [{}], messages {}, aircraft {}, tracks {}, fixes {} ({:.1}/s), suspects {}, conflicts {}, \
-         rejected measurements {}, fusion fallbacks {}, unknown senders {}, socket errors {}, queue drops {}, \
-         kernel drops {}, output errors {}, output drops {}, mlat {} (self-synchronised {}), late copies {}",
-        s.frames,
-        per_rx.join(" "),
-        s.messages,
-        front.aircraft,
-        back.fuser().tracks(),
-        s.fixes,
-        recent.0 as f64 / recent.1.max(1e-9),
-        f.suspect_flags,
-        f.conflicts,
-        f.rejected().iter().map(|(_, n)| n).sum::<u64>(),
-        f.fusion_fallbacks,
-        reg.unknown_senders.load(Ordering::Relaxed),
-        reg.socket_errors.load(Ordering::Relaxed),
-        reg.queue_drops.load(Ordering::Relaxed),
-        reg.kernel_drops.load(Ordering::Relaxed),
-        out_err,
-        out_dropped,
-        front.mlat_fixes,
-        front.self_synced_fixes,
-        s.late_copies,
+    report::stats_line(
+        &front,
+        &back,
+        &registry,
+        &outputs,
+        (front.stats.fixes - last_fixes, unix_now() - last),
     );
-}
-
-fn metrics(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outputs) {
-    let s = &front.stats;
-    metrics::counter!("fuse1090_frames_total").absolute(s.frames);
-    metrics::counter!("fuse1090_frames_dispatched_total").absolute(front.dispatched);
-    metrics::counter!("fuse1090_messages_total").absolute(s.messages);
-    metrics::counter!("fuse1090_mlat_fixes_total").absolute(s.fixes);
-    metrics::counter!("fuse1090_mlat_self_synced_fixes_total").absolute(front.self_synced_fixes);
-    // Copies a link delivered after their transmission was processed.
-    metrics::counter!("fuse1090_late_copies_total").absolute(s.late_copies);
-    metrics::gauge!("fuse1090_tracks").set(back.fuser().tracks() as f64);
-    metrics::counter!("fuse1090_unknown_senders_total").absolute(reg.unknown_senders.load(Ordering::Relaxed));
-    metrics::counter!("fuse1090_socket_errors_total").absolute(reg.socket_errors.load(Ordering::Relaxed));
-    metrics::counter!("fuse1090_queue_drops_total").absolute(reg.queue_drops.load(Ordering::Relaxed));
-    let http = &reg.metrics_http;
-    metrics::counter!("fuse1090_metrics_http_refused_total").absolute(http.refused.load(Ordering::Relaxed));
-    metrics::counter!("fuse1090_metrics_http_timed_out_total")
-        .absolute(http.timed_out.load(Ordering::Relaxed));
-    metrics::counter!("fuse1090_metrics_http_accept_errors_total")
-        .absolute(http.accept_errors.load(Ordering::Relaxed));
-    // Datagrams lost in the kernel, the UDP inputs' buffers full.
-    metrics::counter!("fuse1090_udp_kernel_drops_total").absolute(reg.kernel_drops.load(Ordering::Relaxed));
-    // Frames waiting for the core: it fills before anything is dropped.
-    metrics::gauge!("fuse1090_queue_frames").set(reg.queued.load(Ordering::Relaxed) as f64);
-    for (r, c) in reg.receivers.read().expect("registry").iter() {
-        let id = r.id.clone();
-        metrics::counter!("fuse1090_receiver_frames_total", "receiver" => id.clone())
-            .absolute(c.frames.load(Ordering::Relaxed));
-        metrics::counter!("fuse1090_receiver_input_errors_total", "receiver" => id.clone())
-            .absolute(c.input_errors.load(Ordering::Relaxed));
-        metrics::counter!("fuse1090_receiver_garbage_bytes_total", "receiver" => id.clone())
-            .absolute(c.garbage_bytes.load(Ordering::Relaxed));
-        metrics::counter!("fuse1090_receiver_heartbeats_total", "receiver" => id.clone())
-            .absolute(c.heartbeats.load(Ordering::Relaxed));
-        metrics::counter!("fuse1090_receiver_throttled_total", "receiver" => id.clone())
-            .absolute(c.throttled.load(Ordering::Relaxed));
-        metrics::counter!("fuse1090_receiver_over_share_total", "receiver" => id.clone())
-            .absolute(c.over_share.load(Ordering::Relaxed));
-        metrics::counter!("fuse1090_receiver_queue_drops_total", "receiver" => id)
-            .absolute(c.queue_drops.load(Ordering::Relaxed));
-    }
-    let f = back.fuser().stats();
-    metrics::counter!("fuse1090_tracks_published_total").absolute(f.published);
-    metrics::counter!("fuse1090_adsb_suspect_flags_total").absolute(f.suspect_flags);
-    // What the tracker turned away or could not do, each by its reason:
-    // the counted skips of bad input, where a user looks first.
-    for (reason, n) in f.rejected() {
-        metrics::counter!("fuse1090_measurements_rejected_total", "reason" => reason).absolute(n);
-    }
-    // Outside a track's gate: the outliers of normal operation, not bad input.
-    metrics::counter!("fuse1090_measurements_gated_total").absolute(f.gated);
-    metrics::counter!("fuse1090_track_restarts_total").absolute(f.restarts);
-    metrics::counter!("fuse1090_fusion_fallbacks_total").absolute(f.fusion_fallbacks);
-    metrics::counter!("fuse1090_output_errors_total")
-        .absolute(outputs.dests.iter().map(|d| d.errors()).sum());
-    // Lines a stdout output's reader was too slow for.
-    metrics::counter!("fuse1090_output_drops_total").absolute(outputs.dests.iter().map(|d| d.dropped).sum());
+    outputs::flush_stdout(Duration::from_secs(1));
 }
 
 #[cfg(all(test, target_os = "linux"))]

@@ -76,7 +76,7 @@ pub async fn replay(capture: &Path, cfg: &Config, speed: f64) -> Result<u64> {
     let shift_ns = ((start - first) * 1e9).round() as i64;
     tracing::info!(
         shift_ns,
-        "replay: the capture's times moved by {shift_ns} ns (subtract it from the output's to compare with the capture)"
+        "the capture's times moved by {shift_ns} ns (subtract it from the output's to compare with the capture)"
     );
     let mut tasks = Vec::new();
     for (rx, frames) in per_rx {

@@ -267,11 +267,7 @@ mod tests {
     use std::sync::mpsc::sync_channel;
     use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
-    fn frames(n: usize) -> Vec<RawFrame> {
-        (0..n)
-            .map(|i| RawFrame::new(&[0x5d, 0x4b, 0x1a, 0x2b, 0, 0, i as u8], i as u64, 0).unwrap())
-            .collect()
-    }
+    use crate::feed::test_frames as frames;
 
     fn beast(frames: &[RawFrame]) -> Vec<u8> {
         let mut out = Vec::new();

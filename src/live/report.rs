@@ -1,0 +1,191 @@
+//! What the service tells its operator about itself: the stats line in the
+//! log and the Prometheus metrics, from the front stage's counters (sent
+//! with each batch), the back stage's and the inputs' registry.
+
+use std::sync::atomic::Ordering;
+
+use super::outputs::Outputs;
+use super::record::RecordStats;
+use super::registry::Registry;
+use crate::core::{Back, CoreStats, Front};
+
+/// The front stage's counters, sent with each batch for the stats line and
+/// the metrics, which the back thread writes (it knows the tracks).
+#[derive(Clone, Copy, Default)]
+pub(super) struct FrontSnapshot {
+    pub stats: CoreStats,
+    pub aircraft: u64,
+    pub mlat_fixes: u64,
+    pub self_synced_fixes: u64,
+    pub dispatched: u64,
+}
+
+/// The front thread's metrics, once a second: per receiver its network
+/// delay (logged once when learnt), late copies and MLAT state, and the
+/// recording's counts.
+pub(super) fn front_metrics(
+    front: &Front,
+    recording: Option<&RecordStats>,
+    announced: &mut std::collections::HashSet<String>,
+) {
+    delay_metrics(front, announced);
+    for (id, n) in front.late_copies() {
+        metrics::counter!("fuse1090_receiver_late_copies_total", "receiver" => id.to_string()).absolute(n);
+    }
+    // MLAT exclusion is a state, not a sentence: an excluded receiver
+    // is still synchronised and comes back (gauge 1 while it is out).
+    for (id, h) in front.mlat_health() {
+        let id = id.to_string();
+        metrics::gauge!("fuse1090_receiver_mlat_excluded", "receiver" => id.clone())
+            .set(h.excluded as u8 as f64);
+        metrics::counter!("fuse1090_receiver_mlat_exclusions_total", "receiver" => id.clone())
+            .absolute(h.exclusions);
+        metrics::counter!("fuse1090_receiver_clock_resets_total", "receiver" => id.clone())
+            .absolute(h.clock_resets);
+        metrics::gauge!("fuse1090_receiver_sync_outlier_rate", "receiver" => id).set(h.outlier_rate);
+    }
+    if let Some(r) = recording {
+        record_metrics(r);
+    }
+}
+
+/// What the recording wrote and could not write.
+fn record_metrics(s: &RecordStats) {
+    metrics::counter!("fuse1090_record_frames_total").absolute(s.frames);
+    metrics::counter!("fuse1090_record_dropped_frames_total").absolute(s.dropped);
+    metrics::counter!("fuse1090_record_write_errors_total").absolute(s.write_errors);
+    metrics::counter!("fuse1090_record_rotations_total").absolute(s.rotations);
+}
+
+/// The network delays learnt for receivers whose reports are dated by
+/// arrival (see `core::delay`): a gauge each, and a log line when a
+/// receiver's is first learnt.
+fn delay_metrics(front: &Front, announced: &mut std::collections::HashSet<String>) {
+    for (id, mean_s, spread_s) in front.learnt_delays() {
+        metrics::gauge!("fuse1090_receiver_network_delay_seconds", "receiver" => id.to_string()).set(mean_s);
+        if !announced.contains(id) {
+            announced.insert(id.to_string());
+            tracing::info!(
+                receiver = id,
+                delay_ms = format!("{:.1}", mean_s * 1e3),
+                spread_ms = format!("{:.1}", spread_s * 1e3),
+                "reports dated by arrival: network delay learnt"
+            );
+        }
+    }
+}
+
+/// The log's stats line; `(fixes, span_s)`: the fixes made since the last
+/// one and the time since.
+pub(super) fn stats_line(
+    front: &FrontSnapshot,
+    back: &Back,
+    reg: &Registry,
+    outputs: &Outputs,
+    recent: (u64, f64),
+) {
+    let s = &front.stats;
+    let f = back.fuser().stats();
+    let per_rx: Vec<String> = reg
+        .receivers
+        .read()
+        .expect("registry")
+        .iter()
+        .map(|(r, c)| {
+            format!(
+                "{}={}/{}err/{}drop/{}thr/{}share",
+                r.id,
+                c.frames.load(Ordering::Relaxed),
+                c.input_errors.load(Ordering::Relaxed),
+                c.queue_drops.load(Ordering::Relaxed),
+                c.throttled.load(Ordering::Relaxed),
+                c.over_share.load(Ordering::Relaxed)
+            )
+        })
+        .collect();
+    let out_err: u64 = outputs.dests.iter().map(|d| d.errors()).sum();
+    let out_dropped: u64 = outputs.dests.iter().map(|d| d.dropped).sum();
+    tracing::info!(
+        "stats: frames {} [{}], messages {}, aircraft {}, tracks {}, fixes {} ({:.1}/s), suspects {}, conflicts {}, \
+         rejected measurements {}, fusion fallbacks {}, unknown senders {}, socket errors {}, queue drops {}, \
+         kernel drops {}, output errors {}, output drops {}, mlat {} (self-synchronised {}), late copies {}",
+        s.frames,
+        per_rx.join(" "),
+        s.messages,
+        front.aircraft,
+        back.fuser().tracks(),
+        s.fixes,
+        recent.0 as f64 / recent.1.max(1e-9),
+        f.suspect_flags,
+        f.conflicts,
+        f.rejected().iter().map(|(_, n)| n).sum::<u64>(),
+        f.fusion_fallbacks,
+        reg.unknown_senders.load(Ordering::Relaxed),
+        reg.socket_errors.load(Ordering::Relaxed),
+        reg.queue_drops.load(Ordering::Relaxed),
+        reg.kernel_drops.load(Ordering::Relaxed),
+        out_err,
+        out_dropped,
+        front.mlat_fixes,
+        front.self_synced_fixes,
+        s.late_copies,
+    );
+}
+
+pub(super) fn metrics(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outputs) {
+    let s = &front.stats;
+    metrics::counter!("fuse1090_frames_total").absolute(s.frames);
+    metrics::counter!("fuse1090_frames_dispatched_total").absolute(front.dispatched);
+    metrics::counter!("fuse1090_messages_total").absolute(s.messages);
+    metrics::counter!("fuse1090_mlat_fixes_total").absolute(s.fixes);
+    metrics::counter!("fuse1090_mlat_self_synced_fixes_total").absolute(front.self_synced_fixes);
+    // Copies a link delivered after their transmission was processed.
+    metrics::counter!("fuse1090_late_copies_total").absolute(s.late_copies);
+    metrics::gauge!("fuse1090_tracks").set(back.fuser().tracks() as f64);
+    metrics::counter!("fuse1090_unknown_senders_total").absolute(reg.unknown_senders.load(Ordering::Relaxed));
+    metrics::counter!("fuse1090_socket_errors_total").absolute(reg.socket_errors.load(Ordering::Relaxed));
+    metrics::counter!("fuse1090_queue_drops_total").absolute(reg.queue_drops.load(Ordering::Relaxed));
+    let http = &reg.metrics_http;
+    metrics::counter!("fuse1090_metrics_http_refused_total").absolute(http.refused.load(Ordering::Relaxed));
+    metrics::counter!("fuse1090_metrics_http_timed_out_total")
+        .absolute(http.timed_out.load(Ordering::Relaxed));
+    metrics::counter!("fuse1090_metrics_http_accept_errors_total")
+        .absolute(http.accept_errors.load(Ordering::Relaxed));
+    // Datagrams lost in the kernel, the UDP inputs' buffers full.
+    metrics::counter!("fuse1090_udp_kernel_drops_total").absolute(reg.kernel_drops.load(Ordering::Relaxed));
+    // Frames waiting for the core: it fills before anything is dropped.
+    metrics::gauge!("fuse1090_queue_frames").set(reg.queued.load(Ordering::Relaxed) as f64);
+    for (r, c) in reg.receivers.read().expect("registry").iter() {
+        let id = r.id.clone();
+        metrics::counter!("fuse1090_receiver_frames_total", "receiver" => id.clone())
+            .absolute(c.frames.load(Ordering::Relaxed));
+        metrics::counter!("fuse1090_receiver_input_errors_total", "receiver" => id.clone())
+            .absolute(c.input_errors.load(Ordering::Relaxed));
+        metrics::counter!("fuse1090_receiver_garbage_bytes_total", "receiver" => id.clone())
+            .absolute(c.garbage_bytes.load(Ordering::Relaxed));
+        metrics::counter!("fuse1090_receiver_heartbeats_total", "receiver" => id.clone())
+            .absolute(c.heartbeats.load(Ordering::Relaxed));
+        metrics::counter!("fuse1090_receiver_throttled_total", "receiver" => id.clone())
+            .absolute(c.throttled.load(Ordering::Relaxed));
+        metrics::counter!("fuse1090_receiver_over_share_total", "receiver" => id.clone())
+            .absolute(c.over_share.load(Ordering::Relaxed));
+        metrics::counter!("fuse1090_receiver_queue_drops_total", "receiver" => id)
+            .absolute(c.queue_drops.load(Ordering::Relaxed));
+    }
+    let f = back.fuser().stats();
+    metrics::counter!("fuse1090_tracks_published_total").absolute(f.published);
+    metrics::counter!("fuse1090_adsb_suspect_flags_total").absolute(f.suspect_flags);
+    // What the tracker turned away or could not do, each by its reason:
+    // the counted skips of bad input, where a user looks first.
+    for (reason, n) in f.rejected() {
+        metrics::counter!("fuse1090_measurements_rejected_total", "reason" => reason).absolute(n);
+    }
+    // Outside a track's gate: the outliers of normal operation, not bad input.
+    metrics::counter!("fuse1090_measurements_gated_total").absolute(f.gated);
+    metrics::counter!("fuse1090_track_restarts_total").absolute(f.restarts);
+    metrics::counter!("fuse1090_fusion_fallbacks_total").absolute(f.fusion_fallbacks);
+    metrics::counter!("fuse1090_output_errors_total")
+        .absolute(outputs.dests.iter().map(|d| d.errors()).sum());
+    // Lines a stdout output's reader was too slow for.
+    metrics::counter!("fuse1090_output_drops_total").absolute(outputs.dests.iter().map(|d| d.dropped).sum());
+}
