@@ -259,3 +259,47 @@ fn late_copies_of_a_delayed_link_are_not_decoded_again() {
     // (waiting for a CPR pair) go unreported.
     assert!(reports as f64 >= 0.985 * heard.len() as f64, "{reports} of {}", heard.len());
 }
+
+/// A counter-timed receiver whose timestamps step by 2 s (a glitch, not a
+/// restart: under the 5 s that restarts its clock) is excluded while its
+/// pairs fail, keeps synchronising while out, and is back in the fixes a
+/// few minutes later. Its exclusion used to be for good.
+#[test]
+fn a_receiver_whose_timestamps_step_is_excluded_and_comes_back() {
+    use fuse1090::feed::capture::CaptureWriter;
+    let mut s = tma_busy_cut(300.0, 40, 10, 0);
+    for r in &mut s.receiver {
+        r.burst_per_min = 0.0;
+    }
+    let (capture, _) = sim(&s);
+    // rx02 (a beast12 counter) steps by 2 s at 60 s.
+    let step_at = s.start_unix + 60.0;
+    let mut reader = CaptureReader::new(&capture[..], "capture");
+    let mut w = CaptureWriter::new(Vec::new(), "stepped").unwrap();
+    while let Some(rec) = reader.next_record().unwrap() {
+        match rec {
+            CaptureRecord::Receiver(d) => {
+                w.receiver(&d).unwrap();
+            }
+            CaptureRecord::Frame(mut f) => {
+                if f.rx == 1 && f.arrival >= step_at && f.frame.has_timing() {
+                    f.frame.timestamp += 24_000_000;
+                }
+                w.frame(f.arrival, f.rx, &f.frame).unwrap();
+            }
+        }
+    }
+    let stepped = w.into_inner();
+    assert_eq!(reader.receivers()[1].clock, ClockKind::Beast12);
+    let (core, events, _) = run_core(&stepped, &CoreConfig::default());
+    let h = core.mlat().sync.health[1];
+    eprintln!("rx02 after the step: {h:?}");
+    assert!(h.exclusions >= 1, "the step went unseen: {h:?}");
+    assert!(!h.excluded, "still excluded at the end: {h:?}");
+    let late_fixes_with_it = events
+        .iter()
+        .filter_map(|e| if let Event::Mlat(f) = e { Some(f) } else { None })
+        .filter(|f| f.t > s.start_unix + 240.0 && f.receivers.contains(&1))
+        .count();
+    assert!(late_fixes_with_it > 50, "rx02 in {late_fixes_with_it} fixes of the last minute");
+}
