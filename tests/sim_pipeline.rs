@@ -255,3 +255,102 @@ fn two_threads_write_the_same_bytes_as_one() {
     assert!(text.contains("\"type\":\"position\""));
     assert!(threaded == single, "outputs differ");
 }
+
+/// A receiver's timing faults as the scenario sets them (a GPS bias, a
+/// Gaussian core, multipath: a share of receptions late by an exponential
+/// delay) are in the capture: measured against a perfect receiver over the
+/// truth's geometry, and written in the truth file.
+#[test]
+fn simulated_receivers_have_the_timing_faults_their_scenario_gives_them() {
+    use fuse1090::feed::capture::{CaptureReader, CaptureRecord};
+    use fuse1090::geo::{ecef_distance, geodetic_to_ecef};
+    let text = r#"
+seed = 3
+start_unix = 1700000000.0
+duration_s = 300.0
+interrogation_hz = 2.0
+[[receiver]]
+id = "perfect"
+lat = 47.0
+lon = 8.0
+alt_m = 400.0
+clock = "gps"
+range_km = 400.0
+[[receiver]]
+id = "rough"
+lat = 47.4
+lon = 8.6
+alt_m = 400.0
+clock = "gps"
+jitter_ns = 30.0
+bias_ns = 200.0
+multipath_prob = 0.2
+multipath_delay_ns = 500.0
+range_km = 400.0
+[[aircraft]]
+hex = "4B0001"
+start = { lat = 47.2, lon = 8.1, alt_m = 10000.0, speed_mps = 200.0, heading_deg = 45.0 }
+segments = [{ duration_s = 300.0 }]
+"#;
+    let s: Scenario = fuse1090::config::parse_toml(text, "rough").unwrap();
+    let (cap, truth_bytes) = sim_bytes(&s);
+    let truth_text = String::from_utf8(truth_bytes.clone()).unwrap();
+    assert!(truth_text.lines().any(|l| l.contains("\"id\":\"rough\"")
+        && l.contains("\"sigma_ns\":30")
+        && l.contains("\"offset_ns\":200")
+        && l.contains("\"multipath_prob\":0.2")));
+    let truth = Truth::read(&truth_bytes[..]).unwrap();
+    let mut reader = CaptureReader::new(&cap[..], "rough");
+    let (mut first, mut errors_ns) = (std::collections::HashMap::new(), Vec::new());
+    let mut sites = Vec::new();
+    while let Some(rec) = reader.next_record().unwrap() {
+        match rec {
+            CaptureRecord::Receiver(d) => sites.push(geodetic_to_ecef(d.lat, d.lon, d.alt)),
+            CaptureRecord::Frame(f) => {
+                let sod = |ts: u64| (ts >> 30) as f64 + (ts & 0x3FFF_FFFF) as f64 * 1e-9;
+                let key = (f.frame.bytes().to_vec(), (f.arrival * 2.0).round() as i64);
+                match first.remove(&key) {
+                    None => {
+                        first.insert(key, (f.rx, sod(f.frame.timestamp), f.arrival));
+                    }
+                    Some((rx0, t0, arrival)) => {
+                        let (a, b) = if rx0 == 0 {
+                            (t0, sod(f.frame.timestamp))
+                        } else {
+                            (sod(f.frame.timestamp), t0)
+                        };
+                        // Where the aircraft was (the truth, interpolated).
+                        let (lat, lon, alt) = truth.position("4B0001", arrival - 0.05).unwrap();
+                        let pos = geodetic_to_ecef(lat, lon, alt);
+                        let geo =
+                            (ecef_distance(pos, sites[1]) - ecef_distance(pos, sites[0])) / 299_702_547.0;
+                        // A repeat of the same bytes paired with the wrong
+                        // copy is off by the repeat's interval, not by ns.
+                        let e = ((b - a) - geo) * 1e9;
+                        if e.abs() < 50_000.0 {
+                            errors_ns.push(e);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    let n = errors_ns.len() as f64;
+    assert!(n > 1000.0, "{n} receptions by both");
+    // The core: receptions within 5 sigma of the bias; its mean and spread.
+    let core: Vec<f64> = errors_ns.iter().copied().filter(|e| (e - 200.0).abs() < 150.0).collect();
+    let mean = core.iter().sum::<f64>() / core.len() as f64;
+    let sd = (core.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / core.len() as f64).sqrt();
+    // Multipath adds a few late ones inside the window: the mean moves a little up.
+    assert!((mean - 200.0).abs() < 15.0, "bias {mean} ns");
+    assert!((sd - 30.0).abs() < 8.0, "sigma {sd} ns");
+    // Late beyond 150 ns: 20% x exp(-150/500) of all, their excess 500 + 150 ns.
+    let late: Vec<f64> = errors_ns.iter().copied().filter(|e| e - 200.0 >= 150.0).collect();
+    let share = late.len() as f64 / n;
+    assert!((share - 0.2 * (-0.3f64).exp()).abs() < 0.03, "late share {share}");
+    let excess = late.iter().map(|e| e - 200.0).sum::<f64>() / late.len() as f64;
+    assert!((excess - 650.0).abs() < 100.0, "late excess {excess} ns");
+    // Never early beyond the Gaussian core.
+    let early: Vec<f64> = errors_ns.iter().copied().filter(|e| e - 200.0 < -6.0 * 30.0).collect();
+    assert!(early.is_empty(), "{} early receptions of {n}: {:?}", early.len(), &early[..early.len().min(10)]);
+}

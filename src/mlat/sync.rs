@@ -33,6 +33,8 @@ pub struct RxHealth {
     pub outlier_rate: f64,
     pub excluded: bool,
     pub exclusions: u64,
+    /// When it was last excluded (server time).
+    pub excluded_at: f64,
     /// Clock jumps seen in the receiver's own timestamps (restarts).
     pub clock_resets: u64,
 }
@@ -127,6 +129,9 @@ pub struct ClockSync {
 const EXCLUDE_RATE: f64 = 0.3;
 const READMIT_RATE: f64 = 0.1;
 const HEALTH_MIN_UPDATES: u64 = 30;
+/// The shortest exclusion (s): a receiver whose sync fails now and then
+/// must not flap in and out of the fixes with every few transmissions.
+const MIN_EXCLUSION_S: f64 = 60.0;
 
 impl ClockSync {
     pub fn new(params: PairParams) -> Self {
@@ -240,8 +245,8 @@ impl ClockSync {
                     nis_sum += nis.min(100.0);
                     judged += 1;
                 }
-                self.note_health(i, outlier && !out_j);
-                self.note_health(j, outlier && !out_i);
+                self.note_health(i, outlier && !out_j, now);
+                self.note_health(j, outlier && !out_i, now);
             }
         }
         (nis_sum, judged)
@@ -262,23 +267,32 @@ impl ClockSync {
         self.references[rx] = Reference::default();
     }
 
-    fn note_health(&mut self, rx: usize, outlier: bool) {
+    fn note_health(&mut self, rx: usize, outlier: bool, now: f64) {
         let (h, id) = (&mut self.health[rx], &self.ids[rx]);
         h.sync_updates += 1;
         h.sync_outliers += outlier as u64;
         h.outlier_rate = 0.97 * h.outlier_rate + 0.03 * outlier as u8 as f64;
-        if h.sync_updates >= HEALTH_MIN_UPDATES {
-            if !h.excluded && h.outlier_rate > EXCLUDE_RATE {
-                h.excluded = true;
-                h.exclusions += 1;
+        if h.sync_updates < HEALTH_MIN_UPDATES {
+            return;
+        }
+        // Logged at its first exclusions and then each power of two (every
+        // one is in the metrics): a receiver in and out all day must not
+        // fill the log.
+        if !h.excluded && h.outlier_rate > EXCLUDE_RATE {
+            (h.excluded, h.excluded_at) = (true, now);
+            h.exclusions += 1;
+            if h.exclusions.is_power_of_two() {
                 tracing::warn!(
                     receiver = %id,
                     rate = h.outlier_rate,
-                    "receiver excluded from MLAT: sync keeps failing"
+                    exclusions = h.exclusions,
+                    "receiver excluded from MLAT: sync keeps failing (still synchronised, readmitted when it holds)"
                 );
-            } else if h.excluded && h.outlier_rate < READMIT_RATE {
-                h.excluded = false;
-                tracing::info!(receiver = %id, "receiver readmitted to MLAT");
+            }
+        } else if h.excluded && h.outlier_rate < READMIT_RATE && now - h.excluded_at >= MIN_EXCLUSION_S {
+            h.excluded = false;
+            if h.exclusions.is_power_of_two() {
+                tracing::info!(receiver = %id, exclusions = h.exclusions, "receiver readmitted to MLAT");
             }
         }
     }

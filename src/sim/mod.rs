@@ -46,6 +46,8 @@ pub struct SimStats {
     pub aircraft: usize,
     pub transmissions: u64,
     pub receptions: u64,
+    /// Receptions that took a reflected path (late).
+    pub multipath: u64,
     pub truth_lines: u64,
 }
 
@@ -89,6 +91,9 @@ pub fn all_receivers(s: &Scenario) -> Vec<Receiver> {
                 drift_ppm: if gps { 0.0 } else { r.gen_range(-f.max_drift_ppm..=f.max_drift_ppm) },
                 drift_walk_ppm: if gps { 0.0 } else { 0.001 },
                 jitter_ns: f.jitter_ns,
+                bias_ns: 0.0,
+                multipath_prob: 0.0,
+                multipath_delay_ns: 0.0,
                 resets_s: Vec::new(),
                 position_error_m: [0.0; 3],
                 range_km: f.range_km,
@@ -276,7 +281,16 @@ pub fn simulate(s: &Scenario, capture: impl Write, mut truth: impl Write) -> Res
                     continue;
                 }
                 let toa = x.t + d / C_AIR;
-                let ts = rx.clock.timestamp(toa, &mut rx.rng);
+                // Drawn only for a receiver with multipath, so that every
+                // other receiver's random stream is as it was.
+                let late = rx.spec.multipath_prob > 0.0 && rx.rng.gen::<f64>() < rx.spec.multipath_prob;
+                let reflected = if late {
+                    -(1.0 - rx.rng.gen::<f64>()).ln() * rx.spec.multipath_delay_ns * 1e-9
+                } else {
+                    0.0
+                };
+                let ts = rx.clock.timestamp(toa + rx.spec.bias_ns * 1e-9 + reflected, &mut rx.rng);
+                stats.multipath += late as u64;
                 let mut delay = rx.delay.sample(&mut rx.rng).max(2e-4);
                 if rx.bursts.iter().any(|&(a, b)| a <= toa && toa < b) {
                     delay += rx.spec.burst_ms * 1e-3;
@@ -300,7 +314,25 @@ pub fn simulate(s: &Scenario, capture: impl Write, mut truth: impl Write) -> Res
     write_until(&mut pending, &mut cap, i64::MAX)?;
     cap.into_inner().flush()?;
 
-    // Truth: who is who, then where everyone was every 0.1 s.
+    // Truth: each receiver's true timing and position error, who is who,
+    // then where everyone was every 0.1 s.
+    for r in &receivers {
+        let e = r.position_error_m;
+        writeln!(
+            truth,
+            "{{\"type\":\"receiver\",\"id\":\"{}\",\"clock\":\"{}\",\"sigma_ns\":{},\"offset_ns\":{},\
+             \"multipath_prob\":{},\"multipath_delay_ns\":{},\"position_offset_en_m\":[{},{}]}}",
+            r.id,
+            r.clock.name(),
+            r.jitter_ns,
+            r.bias_ns,
+            r.multipath_prob,
+            r.multipath_delay_ns,
+            // Where the antenna is relative to where it is declared (no -0).
+            0.0 - e[0],
+            0.0 - e[1]
+        )?;
+    }
     for a in &aircraft {
         writeln!(
             truth,

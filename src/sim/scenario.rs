@@ -112,6 +112,17 @@ pub struct Receiver {
     /// Timing jitter, 1 sigma (ns).
     #[serde(default, deserialize_with = "non_negative")]
     pub jitter_ns: f64,
+    /// A constant timing offset (ns): a real GPS receiver's fixed bias of
+    /// up to hundreds of ns against true time (for a counter it merges
+    /// into the clock's unknown offset).
+    #[serde(default)]
+    pub bias_ns: f64,
+    /// Multipath: the share of receptions that take a reflected path, and
+    /// the mean of its extra delay (ns, exponential: late, never early).
+    #[serde(default, deserialize_with = "probability")]
+    pub multipath_prob: f64,
+    #[serde(default, deserialize_with = "non_negative")]
+    pub multipath_delay_ns: f64,
     /// Scenario times (s) at which the receiver restarts and its counter starts again from zero.
     #[serde(default)]
     pub resets_s: Vec<f64>,
