@@ -129,9 +129,12 @@ pub struct ClockSync {
 const EXCLUDE_RATE: f64 = 0.3;
 const READMIT_RATE: f64 = 0.1;
 const HEALTH_MIN_UPDATES: u64 = 30;
-/// The shortest exclusion (s): a receiver whose sync fails now and then
-/// must not flap in and out of the fixes with every few transmissions.
+/// The shortest exclusion (s), doubled with each exclusion up to the
+/// longest: a receiver whose sync fails now and then must not flap in and
+/// out of the fixes, and one that keeps failing stays out longer each time,
+/// yet never for good.
 const MIN_EXCLUSION_S: f64 = 60.0;
+const MAX_EXCLUSION_S: f64 = 3600.0;
 
 impl ClockSync {
     pub fn new(params: PairParams) -> Self {
@@ -268,6 +271,9 @@ impl ClockSync {
     }
 
     fn note_health(&mut self, rx: usize, outlier: bool, now: f64) {
+        fn exclusion_s(n: u64) -> f64 {
+            (MIN_EXCLUSION_S * 2f64.powi(n.saturating_sub(1).min(16) as i32)).min(MAX_EXCLUSION_S)
+        }
         let (h, id) = (&mut self.health[rx], &self.ids[rx]);
         h.sync_updates += 1;
         h.sync_outliers += outlier as u64;
@@ -289,7 +295,10 @@ impl ClockSync {
                     "receiver excluded from MLAT: sync keeps failing (still synchronised, readmitted when it holds)"
                 );
             }
-        } else if h.excluded && h.outlier_rate < READMIT_RATE && now - h.excluded_at >= MIN_EXCLUSION_S {
+        } else if h.excluded
+            && h.outlier_rate < READMIT_RATE
+            && now - h.excluded_at >= exclusion_s(h.exclusions)
+        {
             h.excluded = false;
             if h.exclusions.is_power_of_two() {
                 tracing::info!(receiver = %id, exclusions = h.exclusions, "receiver readmitted to MLAT");
