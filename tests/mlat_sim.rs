@@ -13,6 +13,7 @@ use fuse1090::eval::Truth;
 use fuse1090::feed::capture::{CaptureReader, CaptureRecord, ClockKind};
 use fuse1090::geo::geodetic_to_ecef;
 use fuse1090::mlat::solver::crb_en;
+use fuse1090::mlat::RxState;
 use fuse1090::sim::scenario::Scenario;
 use fuse1090::sim::simulate;
 
@@ -302,4 +303,15 @@ fn a_receiver_whose_timestamps_step_is_excluded_and_comes_back() {
         .filter(|f| f.t > s.start_unix + 240.0 && f.receivers.contains(&1))
         .count();
     assert!(late_fixes_with_it > 50, "rx02 in {late_fixes_with_it} fixes of the last minute");
+    // The track stream's receiver records: every receiver once a minute and
+    // at the end; rx02's say it was out for a while and is back.
+    let records: Vec<&fuse1090::mlat::ReceiverReport> =
+        events.iter().filter_map(|e| if let Event::Receiver(r) = e { Some(&**r) } else { None }).collect();
+    // At 60, 120, 180, 240 and 300 s (arrivals run a network delay past the
+    // scenario's end) and at the end, for 12 receivers.
+    assert_eq!(records.len(), 12 * 6);
+    let rx02: Vec<RxState> = records.iter().filter(|r| r.rx == 1).map(|r| r.state).collect();
+    assert!(rx02.contains(&RxState::Excluded) && rx02.last() == Some(&RxState::Ok), "{rx02:?}");
+    let last = records.iter().rev().find(|r| r.rx == 1).unwrap();
+    assert!(last.sigma_ns.is_some_and(|s| s > 0.0) && last.offset_ns.is_none(), "{last:?}");
 }

@@ -60,6 +60,8 @@ struct GroupCtx<'a> {
 
 /// Finest step of time the tracker is told of (s).
 const ADVANCE_STEP_S: f64 = 0.001;
+/// How often (data time, s) every receiver's state goes into the track stream.
+const RECEIVER_REPORT_S: f64 = 60.0;
 
 pub struct Front {
     receivers: Vec<RxState>,
@@ -70,6 +72,10 @@ pub struct Front {
     conformance: ConformanceConfig,
     drop_after_s: f64,
     next_sweep: f64,
+    /// When the receivers' next reports are due (data time), and the
+    /// latest time seen (for the reports at the end).
+    next_receivers: f64,
+    latest: f64,
     /// The time of the last `Cmd::Advance`.
     advanced_to: f64,
     stats: CoreStats,
@@ -99,6 +105,8 @@ impl Front {
             conformance: cfg.fuse.conformance.clone(),
             drop_after_s: cfg.track.drop_after_s,
             next_sweep: f64::NEG_INFINITY,
+            next_receivers: f64::NAN,
+            latest: f64::NEG_INFINITY,
             advanced_to: f64::NEG_INFINITY,
             stats: CoreStats::default(),
             min_sync_nacp: cfg.mlat.min_sync_nacp,
@@ -177,6 +185,13 @@ impl Front {
             self.watched.retain(|_, w| now - w.last_heard <= drop);
             self.mlat.prune(now);
         }
+        self.latest = self.latest.max(now);
+        if self.next_receivers.is_nan() {
+            self.next_receivers = now + RECEIVER_REPORT_S;
+        } else if now >= self.next_receivers {
+            self.next_receivers = now + RECEIVER_REPORT_S;
+            self.report_receivers(now, cmds);
+        }
         // The tracker is told the time at most once a millisecond (and with
         // every measurement, which carries its own): frames arrive a hundred
         // a millisecond at scale, and a command per frame cost more than the
@@ -194,7 +209,18 @@ impl Front {
             let now = g.first_arrival;
             ctx.on_group(g, now, cmds)
         });
+        if self.latest.is_finite() {
+            self.report_receivers(self.latest, cmds);
+        }
         cmds.push(Cmd::Finish);
+    }
+
+    /// Every receiver's multilateration state, as the track stream's
+    /// `receiver` records.
+    fn report_receivers(&self, now: f64, cmds: &mut Vec<Cmd>) {
+        for rx in 0..self.mlat.receiver_count() {
+            cmds.push(Cmd::Event(Event::Receiver(Box::new(self.mlat.receiver_report(rx, now)))));
+        }
     }
 
     /// One record of a capture: a receiver declared, or a frame.

@@ -133,6 +133,8 @@ pub enum Event {
     Mlat(Box<MlatFix>),
     Track(Box<TrackReport>),
     Alert(Alert),
+    /// A receiver's multilateration state, once a minute and at the end.
+    Receiver(Box<crate::mlat::ReceiverReport>),
 }
 
 pub(crate) fn event(o: Output) -> Event {

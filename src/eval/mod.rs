@@ -8,6 +8,7 @@
 //! reports before tracking) as `adsb-report`.
 
 pub mod montecarlo;
+pub mod receivers;
 
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::io::BufRead;
@@ -34,6 +35,8 @@ struct TruthPoint {
 #[derive(Default)]
 pub struct Truth {
     tracks: HashMap<String, Vec<TruthPoint>>,
+    /// The receivers as simulated (their true timing and position errors).
+    pub receivers: Vec<receivers::TrueReceiver>,
     pub spoofers: HashSet<String>,
     pub adsb: HashMap<String, bool>,
 }
@@ -64,6 +67,9 @@ impl Truth {
                 Some("equipage") => {
                     truth.adsb.insert(hex, v["adsb"].as_bool().unwrap_or(true));
                 }
+                Some("receiver") => truth.receivers.push(
+                    serde_json::from_value(v).with_context(|| format!("truth line {}: receiver", i + 1))?,
+                ),
                 _ => {}
             }
         }
@@ -181,6 +187,10 @@ pub struct Report {
     /// aircraft, when the records have all three (`run --source-tracks`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fusion: Option<FusionComparison>,
+    /// Each receiver as learnt (the records' last `receiver` record) beside
+    /// its truth, when the truth has receivers.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub receivers: Vec<receivers::ReceiverRow>,
 }
 
 /// Per aircraft, the RMSE of its fused, ADS-B and MLAT tracks over the time
@@ -291,6 +301,7 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
     // (source, hex, track id) -> accumulated errors.
     let mut accs: BTreeMap<(String, String, String), Acc> = BTreeMap::new();
     let mut unknown = 0;
+    let mut latest_receiver: BTreeMap<String, Value> = BTreeMap::new();
     for (i, line) in records.lines().enumerate() {
         let line = line?;
         if line.trim().is_empty() {
@@ -301,6 +312,12 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
             Some("track") => v["source"].as_str().unwrap_or("fused").to_string(),
             Some("mlat") => "mlat-fix".to_string(),
             Some("position") => "adsb-report".to_string(),
+            Some("receiver") => {
+                if let Some(id) = v["id"].as_str() {
+                    latest_receiver.insert(id.to_string(), v);
+                }
+                continue;
+            }
             _ => continue,
         };
         let (Some(hex), Some(t), Some(lat), Some(lon)) =
@@ -404,7 +421,8 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
             make_row(&source, "all", n, &acc, cont / n as f64, breaks, ft)
         })
         .collect();
-    Ok(Report { overall, aircraft: aircraft_rows, unknown_records: unknown, fusion })
+    let receivers = receivers::compare(&truth.receivers, &latest_receiver);
+    Ok(Report { overall, aircraft: aircraft_rows, unknown_records: unknown, fusion, receivers })
 }
 
 fn fmt_opt(v: Option<f64>, prec: usize) -> String {
@@ -467,6 +485,13 @@ impl std::fmt::Display for Report {
                 c.fused_best,
                 c.aircraft,
                 if others.is_empty() { String::new() } else { format!(" (not: {})", others.join(", ")) }
+            )?;
+        }
+        if !self.receivers.is_empty() {
+            write!(
+                f,
+                "\nreceivers, learnt (the last receiver record) against true:\n{}",
+                receivers::table(&self.receivers)
             )?;
         }
         if self.unknown_records > 0 {

@@ -44,6 +44,22 @@ pub(super) fn front_metrics(
             .absolute(h.clock_resets);
         metrics::gauge!("fuse1090_receiver_sync_outlier_rate", "receiver" => id).set(h.outlier_rate);
     }
+    // What multilateration has learnt of each receiver's timing (absent
+    // until known, as in the track stream's receiver records).
+    for rx in 0..front.mlat().receiver_count() {
+        let r = front.mlat().receiver_report(rx, 0.0);
+        let id = front.receiver_id(rx).to_string();
+        let learnt = [
+            ("fuse1090_receiver_timing_sigma_ns", r.sigma_ns),
+            ("fuse1090_receiver_timing_offset_ns", r.offset_ns),
+            ("fuse1090_receiver_outlier_rate", r.outlier_rate),
+        ];
+        for (name, v) in learnt {
+            if let Some(v) = v {
+                metrics::gauge!(name, "receiver" => id.clone()).set(v);
+            }
+        }
+    }
     if let Some(r) = recording {
         record_metrics(r);
     }

@@ -8,6 +8,7 @@
 //! nothing verified are only trusted when an over-determined fix is
 //! consistent (identical copies at geometrically consistent times).
 
+use super::report::{ReceiverReport, RxState};
 use crate::FastMap;
 use std::collections::HashMap;
 
@@ -171,6 +172,9 @@ struct Rx {
     /// Last (local time, arrival time) seen, to notice clock jumps.
     last_seen: Option<(f64, f64)>,
     cal: Calibration,
+    /// Its copies that went into fixes, and those left out as outliers.
+    copies_used: u64,
+    copies_dropped: u64,
     /// The GPS-timed receiver its clock is best synchronised with, and when
     /// that was last chosen (arrival time).
     gps_partner: Option<(usize, f64)>,
@@ -348,6 +352,8 @@ impl Mlat {
             last_seen: None,
             gps_partner: None,
             cal: Calibration::default(),
+            copies_used: 0,
+            copies_dropped: 0,
         });
         self.sync.add_receiver(d.clock, &d.id);
     }
@@ -468,6 +474,44 @@ impl Mlat {
             let ttl = if a.sync_banned { BANNED_TTL_S } else { AIRCRAFT_TTL_S };
             now - newest <= ttl
         });
+    }
+
+    /// What is known of receiver `rx` at data time `t` (see [`ReceiverReport`]).
+    pub fn receiver_report(&self, rx: usize, t: f64) -> ReceiverReport {
+        let (r, h) = (&self.rxs[rx], &self.sync.health[rx]);
+        let learnt = r.cal.n >= CAL_MIN;
+        let state = if h.excluded {
+            RxState::Excluded
+        } else if learnt || h.sync_updates >= super::sync::HEALTH_MIN_UPDATES {
+            RxState::Ok
+        } else {
+            RxState::Learning
+        };
+        // Biases are relative (a common one goes into the emission time):
+        // a GPS receiver's is told against the other GPS receivers' mean.
+        let gps: Vec<f64> = (self.rxs.iter())
+            .filter(|o| o.clock == ClockKind::Gps && o.cal.n >= CAL_MIN)
+            .map(|o| o.cal.bias_s)
+            .collect();
+        let offset_ns = (r.clock == ClockKind::Gps && learnt && gps.len() >= 2)
+            .then(|| (r.cal.bias_s - gps.iter().sum::<f64>() / gps.len() as f64) * 1e9);
+        let copies = r.copies_used + r.copies_dropped;
+        ReceiverReport {
+            t,
+            rx,
+            state,
+            reason: h.excluded.then_some("its clock synchronisation keeps failing"),
+            sigma_ns: learnt.then(|| r.cal.var_s2.sqrt() * 1e9),
+            offset_ns,
+            outlier_rate: (copies >= CAL_MIN).then(|| r.copies_dropped as f64 / copies as f64),
+            position_offset_en_m: None,
+            position_offset_sigma_m: None,
+        }
+    }
+
+    /// Receivers known.
+    pub fn receiver_count(&self) -> usize {
+        self.rxs.len()
     }
 
     /// Aircraft in the table (for tests and the soak check).
@@ -623,6 +667,9 @@ impl Mlat {
             }
         };
         let used: smallvec::SmallVec<[usize; 8]> = sites.iter().flatten().copied().collect();
+        for &rx in &used {
+            self.rxs[rx].copies_used += 1;
+        }
         if !info.addr_known && fix.dof == 0 {
             // Nothing checks an unverified address: no fix from it.
             self.stats.unverified_address += 1;
@@ -698,7 +745,9 @@ impl Mlat {
                 .map(|(k, _)| k);
             let Some(k) = worst else { break };
             ms.remove(k);
-            sites.remove(k);
+            for &rx in &sites.remove(k) {
+                self.rxs[rx].copies_dropped += 1;
+            }
             self.stats.outliers_dropped += 1;
             result = solve(ms, alt, guess, &self.limits);
         }

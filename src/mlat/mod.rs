@@ -11,7 +11,9 @@ pub mod engine;
 pub mod group;
 mod late;
 mod pending;
+pub mod report;
 pub mod solver;
 pub mod sync;
 
 pub use engine::{Mlat, MlatConfig, MlatFix, MlatStats};
+pub use report::{ReceiverReport, RxState};

@@ -128,7 +128,7 @@ pub struct ClockSync {
 /// Above this recent outlier rate a receiver is excluded; below the second it is readmitted.
 const EXCLUDE_RATE: f64 = 0.3;
 const READMIT_RATE: f64 = 0.1;
-const HEALTH_MIN_UPDATES: u64 = 30;
+pub(crate) const HEALTH_MIN_UPDATES: u64 = 30;
 /// The shortest exclusion (s), doubled with each exclusion up to the
 /// longest: a receiver whose sync fails now and then must not flap in and
 /// out of the fixes, and one that keeps failing stays out longer each time,

@@ -16,7 +16,7 @@ use serde::{Serialize, Serializer};
 
 use crate::core::{Event, PositionReport};
 use crate::fuse::{Alert, TrackReport};
-use crate::mlat::MlatFix;
+use crate::mlat::{MlatFix, ReceiverReport};
 
 /// A JSON object being written, its `type` first. Keys are field names of
 /// this module: plain ASCII, never escaped. The methods are inlined into
@@ -188,8 +188,37 @@ pub fn write_event<'a>(out: &mut Vec<u8>, ev: &Event, receiver_id: impl Fn(usize
             // Into memory: cannot fail.
             let _ = serde_json::to_writer(&mut *out, &alert_record(a));
         }
+        Event::Receiver(r) => receiver(out, r, receiver_id(r.rx)),
     }
     out.push(b'\n');
+}
+
+/// A receiver's multilateration state; what is not known yet is absent.
+fn receiver(out: &mut Vec<u8>, r: &ReceiverReport, id: &str) {
+    let mut o = Obj::start(out, "receiver");
+    o.f64("t", round(r.t, 1e6));
+    o.str("id", id);
+    o.str("state", r.state.name());
+    if let Some(why) = r.reason {
+        o.str("reason", why);
+    }
+    let fields = [
+        ("sigma_ns", r.sigma_ns, 10.0),
+        ("offset_ns", r.offset_ns, 10.0),
+        ("outlier_rate", r.outlier_rate, 1e4),
+    ];
+    for (name, v, scale) in fields {
+        if let Some(v) = v {
+            o.f64(name, round(v, scale));
+        }
+    }
+    if let Some([e, n]) = r.position_offset_en_m {
+        o.floats("position_offset_en_m", &[round(e, 10.0), round(n, 10.0)]);
+    }
+    if let Some(s) = r.position_offset_sigma_m {
+        o.f64("position_offset_sigma_m", round(s, 10.0));
+    }
+    o.end();
 }
 
 /// A decoded ADS-B position report, before any tracking.
@@ -535,5 +564,43 @@ mod tests {
             assert_eq!(json(Hex::addr(v)), format!("\"{v:06X}\""));
             assert_eq!(json(Hex::new(v, 4)), format!("\"{v:04X}\""));
         }
+    }
+
+    /// A receiver record: what is known, nothing absent written as null.
+    #[test]
+    fn a_receiver_record_has_what_is_known_and_nothing_else() {
+        use crate::mlat::{ReceiverReport, RxState};
+        let mut r = ReceiverReport {
+            t: 1_700_000_060.5,
+            rx: 1,
+            state: RxState::Excluded,
+            reason: Some("its clock synchronisation keeps failing"),
+            sigma_ns: Some(75.44),
+            offset_ns: Some(-47.52),
+            outlier_rate: Some(0.08991),
+            position_offset_en_m: Some([120.04, -89.96]),
+            position_offset_sigma_m: Some(12.0),
+        };
+        let names = ["a".to_string(), "n03".to_string()];
+        let v: serde_json::Value =
+            serde_json::from_str(&line(&Event::Receiver(Box::new(r.clone())), &names)).unwrap();
+        assert_eq!(
+            v,
+            serde_json::json!({"type":"receiver","t":1_700_000_060.5,"id":"n03","state":"excluded",
+                "reason":"its clock synchronisation keeps failing","sigma_ns":75.4,"offset_ns":-47.5,
+                "outlier_rate":0.0899,"position_offset_en_m":[120.0,-90.0],"position_offset_sigma_m":12.0})
+        );
+        r = ReceiverReport {
+            state: RxState::Learning,
+            reason: None,
+            sigma_ns: None,
+            offset_ns: None,
+            outlier_rate: None,
+            position_offset_en_m: None,
+            position_offset_sigma_m: None,
+            ..r
+        };
+        let text = line(&Event::Receiver(Box::new(r)), &names);
+        assert_eq!(text.trim_end(), r#"{"type":"receiver","t":1700000060.5,"id":"n03","state":"learning"}"#);
     }
 }
