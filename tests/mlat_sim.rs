@@ -315,3 +315,41 @@ fn a_receiver_whose_timestamps_step_is_excluded_and_comes_back() {
     let last = records.iter().rev().find(|r| r.rx == 1).unwrap();
     assert!(last.sigma_ns.is_some_and(|s| s > 0.0) && last.offset_ns.is_none(), "{last:?}");
 }
+
+/// network-rough: the GPS-timed receiver declared 150 m from its antenna is
+/// found from the ADS-B traffic (where it is, with an honest sigma), and no
+/// other is said to be misplaced. The receiver records carry it.
+#[test]
+fn a_misplaced_gps_receiver_is_surveyed_from_the_traffic() {
+    let s = Scenario::load(&root().join("fixtures/scenarios/network-rough.toml")).unwrap();
+    let (capture, truth_bytes) = sim(&s);
+    let truth = Truth::read(&truth_bytes[..]).unwrap();
+    let (core, events, rxs) = run_core(&capture, &CoreConfig::default());
+    let last: HashMap<usize, &fuse1090::mlat::ReceiverReport> = events
+        .iter()
+        .filter_map(|e| if let Event::Receiver(r) = e { Some((r.rx, &**r)) } else { None })
+        .collect();
+    for (k, t) in truth.receivers.iter().enumerate() {
+        assert_eq!(rxs[k].id, t.id);
+        let r = last[&k];
+        match (t.clock.as_str(), r.position_offset_en_m, r.position_offset_sigma_m) {
+            ("gps", Some([e, n]), Some(sigma)) => {
+                let [te, tn] = t.position_offset_en_m;
+                let miss = (e - te).hypot(n - tn);
+                eprintln!("{}: found {e:+.1},{n:+.1} m +-{sigma:.1}, true {te:+.0},{tn:+.0}", t.id);
+                assert!(miss < 30.0, "{}: {miss:.1} m from its true offset", t.id);
+                // Honest: within four of its sigmas (per axis, so x sqrt 2).
+                assert!(
+                    miss < 4.0 * sigma * std::f64::consts::SQRT_2 + 5.0,
+                    "{}: {miss:.1} m, sigma {sigma:.1}",
+                    t.id
+                );
+            }
+            ("gps", ..) => panic!("{}: not surveyed: {r:?}", t.id),
+            (_, offset, _) => assert!(offset.is_none(), "{}: a counter-timed receiver surveyed", t.id),
+        }
+    }
+    let report = core.mlat().report(s.start_unix + s.duration_s, &|k| rxs[k].id.clone());
+    let misplaced = report.split("misplaced [").nth(1).unwrap().split(']').next().unwrap();
+    assert!(misplaced.starts_with("n06 declared") && !misplaced.contains(';'), "{report}");
+}

@@ -13,6 +13,7 @@ mod late;
 mod pending;
 pub mod report;
 pub mod solver;
+pub mod survey;
 pub mod sync;
 
 pub use engine::{Mlat, MlatConfig, MlatFix, MlatStats};
