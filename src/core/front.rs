@@ -72,10 +72,8 @@ pub struct Front {
     conformance: ConformanceConfig,
     drop_after_s: f64,
     next_sweep: f64,
-    /// When the receivers' next reports are due (data time), and the
-    /// latest time seen (for the reports at the end).
+    /// When the receivers' next reports are due (data time).
     next_receivers: f64,
-    latest: f64,
     /// The time of the last `Cmd::Advance`.
     advanced_to: f64,
     stats: CoreStats,
@@ -106,7 +104,6 @@ impl Front {
             drop_after_s: cfg.track.drop_after_s,
             next_sweep: f64::NEG_INFINITY,
             next_receivers: f64::NAN,
-            latest: f64::NEG_INFINITY,
             advanced_to: f64::NEG_INFINITY,
             stats: CoreStats::default(),
             min_sync_nacp: cfg.mlat.min_sync_nacp,
@@ -184,13 +181,13 @@ impl Front {
             let drop = self.drop_after_s;
             self.watched.retain(|_, w| now - w.last_heard <= drop);
             self.mlat.prune(now);
-        }
-        self.latest = self.latest.max(now);
-        if self.next_receivers.is_nan() {
-            self.next_receivers = now + RECEIVER_REPORT_S;
-        } else if now >= self.next_receivers {
-            self.next_receivers = now + RECEIVER_REPORT_S;
-            self.report_receivers(now, cmds);
+            // Checked with the sweep, once a second: not with every frame.
+            if self.next_receivers.is_nan() {
+                self.next_receivers = now + RECEIVER_REPORT_S;
+            } else if now >= self.next_receivers {
+                self.next_receivers = now + RECEIVER_REPORT_S;
+                self.report_receivers(now, cmds);
+            }
         }
         // The tracker is told the time at most once a millisecond (and with
         // every measurement, which carries its own): frames arrive a hundred
@@ -209,8 +206,8 @@ impl Front {
             let now = g.first_arrival;
             ctx.on_group(g, now, cmds)
         });
-        if self.latest.is_finite() {
-            self.report_receivers(self.latest, cmds);
+        if self.advanced_to.is_finite() {
+            self.report_receivers(self.advanced_to, cmds);
         }
         cmds.push(Cmd::Finish);
     }

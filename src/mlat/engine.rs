@@ -77,6 +77,10 @@ pub struct MlatConfig {
     /// transmission. Mode S only aircraft always get every transmission, and
     /// clock synchronisation always uses every ADS-B position.
     pub adsb_interval_s: f64,
+    /// Use a GPS-timed receiver's position as surveyed from the traffic when
+    /// it is found misplaced (more than 30 m and four sigmas off), instead
+    /// of the declared one. Off: the offset is only reported.
+    pub self_survey: bool,
 }
 
 impl Default for MlatConfig {
@@ -95,6 +99,7 @@ impl Default for MlatConfig {
             timestamp_offset_gps_ns: 0.0,
             calibrate: true,
             adsb_interval_s: 1.0,
+            self_survey: false,
         }
     }
 }
@@ -179,6 +184,11 @@ struct Rx {
     /// Where the traffic says its antenna is, and its east-north-up frame.
     survey: Survey,
     enu: [[f64; 3]; 3],
+    /// Its declared position (geodetic and ECEF; `ecef` is the one in use),
+    /// and the surveyed offset in use instead (east, north m), if any.
+    declared: (f64, f64, f64),
+    declared_ecef: [f64; 3],
+    surveyed: Option<[f64; 2]>,
     /// The GPS-timed receiver its clock is best synchronised with, and when
     /// that was last chosen (arrival time).
     gps_partner: Option<(usize, f64)>,
@@ -209,6 +219,8 @@ pub const BANNED_TTL_S: f64 = 86_400.0;
 /// A surveyed position offset beyond this (m, and four of its sigmas) is
 /// reported as a misplaced receiver.
 const MISPLACED_M: f64 = 30.0;
+/// With `self_survey`, a receiver's survey is looked at every this many measurements.
+const SURVEY_CHECK_EVERY: u64 = 200;
 /// Mean normalised innovation beyond which an aircraft is no longer a sync
 /// source (honest ones average about 1).
 const SYNC_SOURCE_MAX_NIS: f64 = 6.0;
@@ -363,6 +375,9 @@ impl Mlat {
             copies_dropped: 0,
             survey: Survey::default(),
             enu: enu_basis(d.lat, d.lon),
+            declared: (d.lat, d.lon, d.alt),
+            declared_ecef: geodetic_to_ecef(d.lat, d.lon, d.alt),
+            surveyed: None,
         });
         self.sync.add_receiver(d.clock, &d.id);
     }
@@ -538,14 +553,50 @@ impl Mlat {
             }
             let t_emit = swe_others / w_others;
             let r = &self.rxs[rx];
-            let range = ecef_distance(r.ecef, a);
-            let u: [f64; 3] = std::array::from_fn(|k| (r.ecef[k] - a[k]) / range);
+            // Against its declared position, whatever position is in use.
+            let e = e + (ecef_distance(r.ecef, a) - ecef_distance(r.declared_ecef, a)) / C_AIR;
+            let range = ecef_distance(r.declared_ecef, a);
+            let u: [f64; 3] = std::array::from_fn(|k| (r.declared_ecef[k] - a[k]) / range);
             let u_enu = r.enu.map(|axis| axis[0] * u[0] + axis[1] * u[1] + axis[2] * u[2]);
             // Timing (its own and the others'), and the ADS-B position's
             // error, which moves its range and the others' differently.
             let var = C_AIR * C_AIR * (1.0 / w + 1.0 / w_others) + 2.0 * sigma_a * sigma_a;
             self.rxs[rx].survey.add(u_enu, C_AIR * (e - t_emit), var);
+            if self.cfg.self_survey && self.rxs[rx].survey.count() % SURVEY_CHECK_EVERY == 0 {
+                self.apply_survey(rx);
+            }
         }
+    }
+
+    /// Puts a misplaced receiver where the traffic says it is (or back where
+    /// it was declared once the survey no longer says so). Its clock pairs
+    /// start again: what they learnt rested on the old position.
+    fn apply_survey(&mut self, rx: usize) {
+        let r = &self.rxs[rx];
+        let target = r.survey.offset().and_then(|o| {
+            let off = o.enu_m[0].hypot(o.enu_m[1]);
+            (off > MISPLACED_M && off > 4.0 * o.sigma_m).then_some(([o.enu_m[0], o.enu_m[1]], o.sigma_m))
+        });
+        let moved = match (r.surveyed, target) {
+            (None, None) => false,
+            (Some(a), Some((t, sigma))) => (a[0] - t[0]).hypot(a[1] - t[1]) > (3.0 * sigma).max(10.0),
+            _ => true,
+        };
+        if !moved {
+            return;
+        }
+        let (lat, lon, alt) = r.declared;
+        let r = &mut self.rxs[rx];
+        r.surveyed = target.map(|t| t.0);
+        r.ecef = match r.surveyed {
+            Some([e, n]) => {
+                let (la, lo, h) = crate::geo::displace(lat, lon, alt, [e, n, 0.0]);
+                geodetic_to_ecef(la, lo, h)
+            }
+            None => r.declared_ecef,
+        };
+        tracing::info!(receiver = %r.id, offset_en_m = ?r.surveyed, "self-survey: the receiver's position in use changed");
+        self.sync.reset_pairs(rx);
     }
 
     /// What is known of receiver `rx` at data time `t` (see [`ReceiverReport`]).
@@ -635,14 +686,16 @@ impl Mlat {
         // receiver is excluded, and is the one to find).
         let mut all_copies = None;
         if copies.iter().any(|c| self.sync.health[c.rx].excluded) {
-            all_copies = Some(copies.clone());
+            if info.adsb_ecef.is_some() && !info.suspect {
+                all_copies = Some(copies.clone());
+            }
             let before = copies.len();
-            let kept: GroupVec<(LocalCopy, f64)> = (copies.iter().zip(&arrivals))
-                .filter(|(c, _)| !self.sync.health[c.rx].excluded)
-                .map(|(c, a)| (*c, *a))
-                .collect();
-            copies = kept.iter().map(|k| k.0).collect();
-            arrivals = kept.iter().map(|k| k.1).collect();
+            for k in (0..copies.len()).rev() {
+                if self.sync.health[copies[k].rx].excluded {
+                    copies.remove(k);
+                    arrivals.remove(k);
+                }
+            }
             self.stats.excluded_receiver_copies += (before - copies.len()) as u64;
         }
         if let Some(a) = info.alt_baro_ft {

@@ -31,13 +31,14 @@ pub struct Survey {
     b: Vector4<f64>,
     /// Weighted sum of squared excesses (for the residuals' chi-square).
     dd: f64,
-    /// Measurements, as forgotten.
+    /// Measurements, as forgotten, and in all.
     n: f64,
+    count: u64,
 }
 
 impl Default for Survey {
     fn default() -> Self {
-        Survey { a: Matrix4::zeros(), b: Vector4::zeros(), dd: 0.0, n: 0.0 }
+        Survey { a: Matrix4::zeros(), b: Vector4::zeros(), dd: 0.0, n: 0.0, count: 0 }
     }
 }
 
@@ -64,6 +65,12 @@ impl Survey {
         self.b = self.b * keep + x * (w * d_m);
         self.dd = self.dd * keep + w * d_m * d_m;
         self.n = self.n * keep + 1.0;
+        self.count += 1;
+    }
+
+    /// Measurements taken in all.
+    pub fn count(&self) -> u64 {
+        self.count
     }
 
     /// The offset, once enough traffic from enough directions was heard.

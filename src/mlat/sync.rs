@@ -258,6 +258,15 @@ impl ClockSync {
     /// A receiver's clock jumped (restart): its pairs start again, and the
     /// jump is not held against its health.
     pub fn reset_receiver(&mut self, rx: usize) {
+        self.reset_pairs(rx);
+        self.health[rx].clock_resets += 1;
+        // Its clock is learnt again from what comes next.
+        self.references[rx] = Reference::default();
+    }
+
+    /// A receiver's pairs start again (its clock jumped, or its position
+    /// was corrected: what they learnt no longer holds).
+    pub fn reset_pairs(&mut self, rx: usize) {
         let before = self.pairs.len();
         self.pairs.retain(|&(i, j), _| i != rx && j != rx);
         self.gps_peers[rx].clear();
@@ -265,26 +274,32 @@ impl ClockSync {
             peers.retain(|&g| g != rx);
         }
         self.stats.restarts += (before - self.pairs.len()) as u64;
-        self.health[rx].clock_resets += 1;
-        // Its clock is learnt again from what comes next.
-        self.references[rx] = Reference::default();
     }
 
+    /// One sync measurement of `rx`'s: its outlier rate, and its exclusion
+    /// or readmission when that crosses a threshold (the rare part, apart).
+    #[inline]
     fn note_health(&mut self, rx: usize, outlier: bool, now: f64) {
+        let h = &mut self.health[rx];
+        h.sync_updates += 1;
+        h.sync_outliers += outlier as u64;
+        h.outlier_rate = 0.97 * h.outlier_rate + 0.03 * outlier as u8 as f64;
+        let turns = if h.excluded { h.outlier_rate < READMIT_RATE } else { h.outlier_rate > EXCLUDE_RATE };
+        if turns && h.sync_updates >= HEALTH_MIN_UPDATES {
+            self.exclude_or_readmit(rx, now);
+        }
+    }
+
+    #[cold]
+    fn exclude_or_readmit(&mut self, rx: usize, now: f64) {
         fn exclusion_s(n: u64) -> f64 {
             (MIN_EXCLUSION_S * 2f64.powi(n.saturating_sub(1).min(16) as i32)).min(MAX_EXCLUSION_S)
         }
         let (h, id) = (&mut self.health[rx], &self.ids[rx]);
-        h.sync_updates += 1;
-        h.sync_outliers += outlier as u64;
-        h.outlier_rate = 0.97 * h.outlier_rate + 0.03 * outlier as u8 as f64;
-        if h.sync_updates < HEALTH_MIN_UPDATES {
-            return;
-        }
         // Logged at its first exclusions and then each power of two (every
         // one is in the metrics): a receiver in and out all day must not
         // fill the log.
-        if !h.excluded && h.outlier_rate > EXCLUDE_RATE {
+        if !h.excluded {
             (h.excluded, h.excluded_at) = (true, now);
             h.exclusions += 1;
             if h.exclusions.is_power_of_two() {
@@ -295,10 +310,7 @@ impl ClockSync {
                     "receiver excluded from MLAT: sync keeps failing (still synchronised, readmitted when it holds)"
                 );
             }
-        } else if h.excluded
-            && h.outlier_rate < READMIT_RATE
-            && now - h.excluded_at >= exclusion_s(h.exclusions)
-        {
+        } else if now - h.excluded_at >= exclusion_s(h.exclusions) {
             h.excluded = false;
             if h.exclusions.is_power_of_two() {
                 tracing::info!(receiver = %id, exclusions = h.exclusions, "receiver readmitted to MLAT");
