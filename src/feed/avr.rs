@@ -27,6 +27,12 @@ impl AvrParser {
 
     fn end_token(&mut self, sink: &mut dyn FnMut(FeedEvent)) {
         self.in_token = false;
+        // dump1090's keep-alive on an idle raw port: not a frame.
+        if self.token == b"*0000" {
+            self.stats.heartbeats += 1;
+            self.token.clear();
+            return;
+        }
         match parse_avr_token(&self.token) {
             Some(frame) => {
                 self.stats.count_frame(&frame);
@@ -170,5 +176,15 @@ mod tests {
         let (frames, stats) = run(&[b"*8D4840;\n*8D4840D6202CC371C32CE057609;\n<0011;\n"]);
         assert!(frames.is_empty());
         assert_eq!(stats.broken_frames, 3);
+    }
+
+    #[test]
+    fn a_raw_heartbeat_is_counted_not_a_frame() {
+        let mut p = AvrParser::new();
+        let mut frames = 0;
+        p.push(b"*0000;\n*8D4840D6202CC371C32CE0576098;\n*0000;\n", &mut |e| {
+            frames += matches!(e, FeedEvent::Frame(_)) as usize
+        });
+        assert_eq!((frames, p.stats.heartbeats, p.stats.input_errors()), (1, 2, 0));
     }
 }

@@ -405,4 +405,14 @@ mod tests {
         assert_eq!(p.stats().skipped_frames, 1);
         assert_eq!(out.len(), 2);
     }
+
+    #[test]
+    fn a_beast_heartbeat_is_counted_not_a_frame() {
+        let mut p = BeastParser::default();
+        let mut frames = 0;
+        let mut bytes = vec![0x1a, b'1', 0, 0, 0, 0, 0, 0, 0, 0, 0];
+        encode(&RawFrame::new(&[0x20, 0, 0, 0, 0, 0, 0], 5, 9).unwrap(), &mut bytes);
+        p.push(&bytes, &mut |e| frames += matches!(e, FeedEvent::Frame(_)) as usize);
+        assert_eq!((frames, p.stats().heartbeats, p.stats().input_errors()), (1, 1, 0));
+    }
 }

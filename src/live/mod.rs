@@ -208,10 +208,13 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
         receivers = cfg.receiver.len(),
         "running"
     );
+    // Apart from the inputs' tasks: a reload that replaces the inputs must
+    // not end the demo's replay.
+    let mut demo_task = None;
     if !cfg.service.demo_capture.is_empty() {
         let (capture, speed, demo_cfg) =
             (PathBuf::from(&cfg.service.demo_capture), cfg.service.demo_speed, cfg.clone());
-        tasks.push(tokio::spawn(async move {
+        demo_task = Some(tokio::spawn(async move {
             match replay::replay(&capture, &demo_cfg, speed).await {
                 Ok(n) => tracing::info!(frames = n, "demo replay finished"),
                 Err(e) => tracing::error!("demo replay: {e:#}"),
@@ -250,7 +253,7 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
         }
     }
     tracing::info!("stopping");
-    for t in tasks.into_iter().chain(metrics_task) {
+    for t in tasks.into_iter().chain(metrics_task).chain(demo_task) {
         t.abort();
     }
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);

@@ -61,7 +61,7 @@ pub struct Registry {
     /// Bumped whenever `receivers` changes (SIGHUP), so the inputs' caches
     /// of it know to refresh.
     pub generation: AtomicU64,
-    /// How many receivers `receivers` holds (for the fair share, without a lock).
+    /// How many receivers are configured (not revoked), for the fair share without a lock.
     pub receiver_count: AtomicUsize,
     /// Datagrams the kernel dropped on the UDP inputs' sockets, their
     /// buffers full (`SO_RXQ_OVFL`): lost before any receiver could be named.
@@ -115,6 +115,15 @@ impl Registry {
         for r in &added {
             self.add(r.clone());
         }
+        // The fair share is of the receivers configured now.
+        let active = self
+            .receivers
+            .read()
+            .expect("registry")
+            .iter()
+            .filter(|(_, c)| !c.revoked.load(Ordering::Relaxed))
+            .count();
+        self.receiver_count.store(active, Ordering::Relaxed);
         self.generation.fetch_add(1, Ordering::Relaxed);
         added
     }
