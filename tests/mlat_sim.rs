@@ -294,8 +294,10 @@ fn a_receiver_whose_timestamps_step_is_excluded_and_comes_back() {
     assert_eq!(reader.receivers()[1].clock, ClockKind::Beast12);
     let (core, events, _) = run_core(&stepped, &CoreConfig::default());
     let h = core.mlat().sync.health[1];
-    eprintln!("rx02 after the step: {h:?}");
+    eprintln!("rx02 after the step: {h:?}; banned sync sources {}", core.mlat().stats.sync_banned_aircraft);
     assert!(h.exclusions >= 1, "the step went unseen: {h:?}");
+    // Its pairs' outliers are the receiver's fault, not the aircraft's.
+    assert_eq!(core.mlat().stats.sync_banned_aircraft, 0, "honest aircraft banned as sync sources");
     assert!(!h.excluded, "still excluded at the end: {h:?}");
     let late_fixes_with_it = events
         .iter()
