@@ -651,3 +651,38 @@ fn a_burst_of_frames_in_one_tcp_read_is_processed_whole() {
         std::fs::read_to_string(&log_path).unwrap()
     );
 }
+
+/// What multilateration learnt of the receivers is saved at SIGTERM and
+/// taken up by the next start: the receivers' records right after the
+/// restart carry the timing learnt before it.
+#[test]
+fn the_learnt_state_survives_a_restart() {
+    let work = common::scratch("e2e-state");
+    let (port, state) = (common::free_port(), work.path().join("learnt.json"));
+    let cfg = work.path().join("c.toml");
+    let text = demo(port, 20.0, "kind = \"stdout\"\n")
+        .replace("[service]\n", &format!("[service]\nstate_file = \"{}\"\n", state.display()));
+    std::fs::write(&cfg, text).unwrap();
+    let first_log = work.path().join("first.log");
+    let mut first = daemon(&cfg, &first_log, None);
+    wait_for_log(&first_log, "no learnt state yet");
+    let t0 = Instant::now();
+    while !std::fs::read_to_string(&first_log).unwrap_or_default().contains("demo replay finished") {
+        assert!(t0.elapsed() < Duration::from_secs(20), "the demo never finished");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    signal(&first, "TERM");
+    assert!(exit_within(&mut first, Duration::from_secs(5)).is_some_and(|s| s.success()));
+    let saved: Value = serde_json::from_slice(&std::fs::read(&state).unwrap()).unwrap();
+    let receivers = saved["receivers"].as_array().unwrap();
+    assert_eq!(receivers.len(), 8);
+    assert!(receivers.iter().all(|r| r["fixes"].as_u64().unwrap() > 100), "{saved}");
+    // Started again: all eight taken up before any frame.
+    let second_log = work.path().join("second.log");
+    let mut second = daemon(&cfg, &second_log, None);
+    wait_for_log(&second_log, "learnt state taken up");
+    let said = std::fs::read_to_string(&second_log).unwrap();
+    assert!(said.contains("receivers=8"), "{said}");
+    signal(&second, "TERM");
+    assert!(exit_within(&mut second, Duration::from_secs(5)).is_some());
+}

@@ -152,6 +152,11 @@ impl Front {
         &self.mlat
     }
 
+    /// For taking up what a previous run learnt (the service, at start).
+    pub fn mlat_mut(&mut self) -> &mut Mlat {
+        &mut self.mlat
+    }
+
     /// Whether the conformance monitor distrusts an aircraft's ADS-B.
     pub fn is_suspect(&self, addr: u32) -> bool {
         self.watched.get(&addr).is_some_and(|w| w.monitor.suspect)

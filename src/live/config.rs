@@ -19,6 +19,9 @@ pub struct ServiceConfig {
     pub record_max_age_s: f64,
     /// ... keeping this many rotated files beside the current one.
     pub record_keep: usize,
+    /// What multilateration has learnt of each receiver (timing, position
+    /// survey), saved here at shutdown and taken up at start; empty: off.
+    pub state_file: String,
     /// One stats line in the log this often (s).
     pub stats_interval_s: f64,
     /// Prometheus text endpoint (host:port); empty: off.
@@ -47,6 +50,7 @@ impl Default for ServiceConfig {
             record_max_bytes: 1 << 30,
             record_max_age_s: 3600.0,
             record_keep: 8,
+            state_file: String::new(),
             stats_interval_s: 60.0,
             metrics_listen: String::new(),
             sac: 0,

@@ -186,13 +186,14 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
         }
     };
     let stats_every = cfg.service.stats_interval_s;
+    let state_file = (!cfg.service.state_file.is_empty()).then(|| PathBuf::from(&cfg.service.state_file));
     // Every port bound before anything runs: one that is taken (another
     // daemon, a stale instance) fails the start, where systemd shows it.
     let bound = inputs::bind_all(&cfg.input).await.map_err(anyhow::Error::msg)?;
     let reg = registry.clone();
     let core_thread = std::thread::Builder::new()
         .name("core".into())
-        .spawn(move || core_loop(core_cfg, decls, outputs, recorder, rx, reg, stats_every))?;
+        .spawn(move || core_loop(core_cfg, decls, outputs, recorder, rx, reg, (stats_every, state_file)))?;
 
     let spawn_all = |list: &[InputConfig], bound: Vec<inputs::Bound>| -> Vec<tokio::task::JoinHandle<()>> {
         list.iter()
@@ -332,7 +333,7 @@ fn core_loop(
     mut recorder: Option<Recorder>,
     rx: Receiver<ToCore>,
     registry: Arc<Registry>,
-    stats_every: f64,
+    (stats_every, state_file): (f64, Option<PathBuf>),
 ) {
     let (mut front, back) = Core::stages(&cfg);
     let mut cmds = Vec::new();
@@ -341,6 +342,16 @@ fn core_loop(
             r.receiver(&d, unix_now());
         }
         front.add_receiver(d, &mut cmds);
+    }
+    if let Some(path) = &state_file {
+        match crate::mlat::state::LearntState::load(path) {
+            Ok(Some(state)) => {
+                let n = front.mlat_mut().restore(&state);
+                tracing::info!(path = %path.display(), receivers = n, "learnt state taken up");
+            }
+            Ok(None) => tracing::info!(path = %path.display(), "no learnt state yet"),
+            Err(e) => tracing::warn!("learnt state not taken up: {e}"),
+        }
     }
     let (to_back, from_front) = sync_channel::<ToBack>(STAGE_QUEUE);
     let back_registry = registry.clone();
@@ -440,6 +451,12 @@ fn core_loop(
         }
     }
     front.finish(&mut cmds);
+    if let Some(path) = &state_file {
+        match front.mlat().learnt(unix_now()).save(path) {
+            Ok(()) => tracing::info!(path = %path.display(), "learnt state saved"),
+            Err(e) => tracing::error!(path = %path.display(), "learnt state not saved: {e}"),
+        }
+    }
     let _ = to_back.send(ToBack::Batch { cmds, now: unix_now(), front: snapshot(&front, dispatched) });
     drop(to_back);
     if back_thread.join().is_err() {

@@ -9,6 +9,7 @@
 //! consistent (identical copies at geometrically consistent times).
 
 use super::report::{ReceiverReport, RxState};
+use super::state::{LearntReceiver, LearntState};
 use super::survey::{enu_basis, Survey};
 use crate::FastMap;
 use std::collections::HashMap;
@@ -631,6 +632,46 @@ impl Mlat {
             position_offset_en_m: offset.map(|o| [o.enu_m[0], o.enu_m[1]]),
             position_offset_sigma_m: offset.map(|o| o.sigma_m),
         }
+    }
+
+    /// What has been learnt of every receiver, to be kept across a restart.
+    pub fn learnt(&self, saved_unix: f64) -> LearntState {
+        let receivers = (self.rxs.iter())
+            .map(|r| LearntReceiver {
+                id: r.id.clone(),
+                clock: r.clock.name().to_string(),
+                lat: r.declared.0,
+                lon: r.declared.1,
+                alt_m: r.declared.2,
+                fixes: r.cal.n,
+                bias_s: r.cal.bias_s,
+                var_s2: r.cal.var_s2,
+                survey: r.survey.snapshot(),
+            })
+            .collect();
+        LearntState { version: super::state::VERSION, saved_unix, receivers }
+    }
+
+    /// Takes up what a previous run learnt, for each receiver with the same
+    /// id, clock kind and declared position; returns how many.
+    pub fn restore(&mut self, state: &LearntState) -> usize {
+        let mut restored = 0;
+        for r in &mut self.rxs {
+            let Some(l) = state.receivers.iter().find(|l| l.id == r.id) else { continue };
+            let same_place = geodetic_to_ecef(l.lat, l.lon, l.alt_m);
+            if l.clock != r.clock.name() || ecef_distance(same_place, r.declared_ecef) > 1.0 {
+                continue;
+            }
+            if !(l.bias_s.is_finite() && l.var_s2.is_finite() && l.var_s2 >= 0.0) {
+                continue;
+            }
+            r.cal = Calibration { n: l.fixes, bias_s: l.bias_s, var_s2: l.var_s2 };
+            if let Some(s) = Survey::from_snapshot(&l.survey) {
+                r.survey = s;
+            }
+            restored += 1;
+        }
+        restored
     }
 
     /// Receivers known.
@@ -1317,5 +1358,52 @@ mod tests {
         assert_eq!(m.aircraft_count(), 1, "a banned sync source is remembered longer");
         m.prune(t + 49.0 + BANNED_TTL_S + 1.0);
         assert_eq!(m.aircraft_count(), 0);
+    }
+
+    /// What one engine learnt, saved and taken up by another (a restart),
+    /// gives the same receiver reports; a receiver since moved is not
+    /// taken up.
+    #[test]
+    fn learnt_state_survives_a_restart_but_not_a_move() {
+        let (mut m, rxs) = engine();
+        let t0 = 1_700_000_000.0;
+        for k in 0..300 {
+            let (lat, lon) = (48.5 + 0.03 * (k % 17) as f64, 2.1 + 0.04 * (k % 13) as f64);
+            let mut g = group(&rxs, geodetic_to_ecef(lat, lon, 30_000.0 * FT_TO_M), t0 + k as f64);
+            delay(&mut g.copies[2], 120e-9);
+            m.on_group(&g, t0 + k as f64 + 0.2);
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("state.json");
+        m.learnt(t0).save(&path).unwrap();
+        let state = LearntState::load(&path).unwrap().unwrap();
+        let (mut fresh, _) = engine();
+        assert_eq!(fresh.restore(&state), 5);
+        // The same timing (to the JSON's last bit; the outlier counts are this run's).
+        let close = |a: Option<f64>, b: Option<f64>| match (a, b) {
+            (Some(a), Some(b)) => (a - b).abs() <= 1e-9 * a.abs().max(1.0),
+            (a, b) => a == b,
+        };
+        for rx in 0..5 {
+            let (a, b) = (fresh.receiver_report(rx, t0), m.receiver_report(rx, t0));
+            assert_eq!(a.state, b.state, "receiver {rx}");
+            assert!(close(a.sigma_ns, b.sigma_ns) && close(a.offset_ns, b.offset_ns), "{a:?} {b:?}");
+        }
+        assert!(m.receiver_report(2, t0).sigma_ns.is_some());
+        // Moved 50 m: learnt afresh.
+        let mut moved = Mlat::new(MlatConfig::default());
+        for (k, r) in rxs.iter().enumerate() {
+            let mut d = r.clone();
+            if k == 2 {
+                d.lat += 50.0 / 111_200.0;
+            }
+            moved.add_receiver(&d);
+        }
+        assert_eq!(moved.restore(&state), 4);
+        assert_eq!(moved.receiver_report(2, t0).sigma_ns, None);
+        // No file yet, and a file of another version.
+        assert_eq!(LearntState::load(&dir.path().join("none.json")), Ok(None));
+        std::fs::write(&path, r#"{"version":99,"saved_unix":0,"receivers":[]}"#).unwrap();
+        assert!(LearntState::load(&path).unwrap_err().contains("version 99"));
     }
 }

@@ -13,6 +13,7 @@ mod late;
 mod pending;
 pub mod report;
 pub mod solver;
+pub mod state;
 pub mod survey;
 pub mod sync;
 

@@ -17,6 +17,8 @@
 
 use nalgebra::{Matrix4, Vector4};
 
+use super::state::SurveySnapshot;
+
 /// The fit's memory, in measurements: slow forgetting, so that a receiver
 /// moved (or corrected) is found again.
 const MEMORY: f64 = 5_000.0;
@@ -71,6 +73,29 @@ impl Survey {
     /// Measurements taken in all.
     pub fn count(&self) -> u64 {
         self.count
+    }
+
+    /// Its state, to be kept across a restart.
+    pub fn snapshot(&self) -> SurveySnapshot {
+        SurveySnapshot {
+            a: self.a.as_slice().to_vec(),
+            b: self.b.as_slice().to_vec(),
+            dd: self.dd,
+            n: self.n,
+            count: self.count,
+        }
+    }
+
+    /// A survey as it was saved (`None` if the snapshot is malformed).
+    pub fn from_snapshot(s: &SurveySnapshot) -> Option<Survey> {
+        let finite = s.a.iter().chain(&s.b).chain([&s.dd, &s.n]).all(|v| v.is_finite());
+        (s.a.len() == 16 && s.b.len() == 4 && finite).then(|| Survey {
+            a: Matrix4::from_column_slice(&s.a),
+            b: Vector4::from_column_slice(&s.b),
+            dd: s.dd,
+            n: s.n,
+            count: s.count,
+        })
     }
 
     /// The offset, once enough traffic from enough directions was heard.

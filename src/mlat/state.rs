@@ -1,0 +1,78 @@
+//! What multilateration has learnt of each receiver, kept across restarts
+//! (`[service] state_file`): its timing calibration (bias and noise) and
+//! its position survey. A restart then starts from what was known, not
+//! from the configured priors; the receivers' clock pairs are learnt again
+//! in seconds and are not kept.
+//!
+//! JSON, one object: `{"version":1,"saved_unix":..,"receivers":[{"id":..,
+//! "clock":"gps","lat":..,"lon":..,"alt_m":..,"fixes":..,"bias_s":..,
+//! "var_s2":..,"survey":{...}}]}`. A receiver is restored only if its id,
+//! clock kind and declared position (within a metre) are unchanged: a
+//! receiver moved or reconfigured is learnt afresh.
+
+use serde::{Deserialize, Serialize};
+
+/// The file's version: a file of another version is ignored (and said so).
+pub const VERSION: u32 = 1;
+
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+pub struct LearntState {
+    pub version: u32,
+    pub saved_unix: f64,
+    pub receivers: Vec<LearntReceiver>,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+pub struct LearntReceiver {
+    pub id: String,
+    pub clock: String,
+    pub lat: f64,
+    pub lon: f64,
+    pub alt_m: f64,
+    /// Fixes its calibration rests on, its timing bias (s) and noise variance (s^2).
+    pub fixes: u64,
+    pub bias_s: f64,
+    pub var_s2: f64,
+    pub survey: SurveySnapshot,
+}
+
+/// A position survey's normal equations, as they stand.
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+pub struct SurveySnapshot {
+    /// The 4x4 matrix, column by column.
+    pub a: Vec<f64>,
+    pub b: Vec<f64>,
+    pub dd: f64,
+    pub n: f64,
+    pub count: u64,
+}
+
+impl LearntState {
+    /// Reads a state file; `Ok(None)` when there is none yet.
+    pub fn load(path: &std::path::Path) -> Result<Option<LearntState>, String> {
+        let text = match std::fs::read_to_string(path) {
+            Ok(t) => t,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(format!("{}: {e}", path.display())),
+        };
+        let state: LearntState =
+            serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+        if state.version != VERSION {
+            return Err(format!(
+                "{}: version {} (this build reads {VERSION})",
+                path.display(),
+                state.version
+            ));
+        }
+        Ok(Some(state))
+    }
+
+    /// Writes it whole or not at all (a temporary file renamed over it).
+    pub fn save(&self, path: &std::path::Path) -> std::io::Result<()> {
+        let mut tmp = path.as_os_str().to_owned();
+        tmp.push(".tmp");
+        let text = serde_json::to_vec(self).map_err(std::io::Error::other)?;
+        std::fs::write(&tmp, text)?;
+        std::fs::rename(&tmp, path)
+    }
+}
