@@ -671,6 +671,9 @@ fn the_learnt_state_survives_a_restart() {
         assert!(t0.elapsed() < Duration::from_secs(20), "the demo never finished");
         std::thread::sleep(Duration::from_millis(100));
     }
+    // The log says what multilateration made of each receiver, with the stats.
+    let said = std::fs::read_to_string(&first_log).unwrap();
+    assert!(said.contains("mlat receivers (state/sigma/offset/outliers/position): s1=ok/"), "{said}");
     signal(&first, "TERM");
     assert!(exit_within(&mut first, Duration::from_secs(5)).is_some_and(|s| s.success()));
     let saved: Value = serde_json::from_slice(&std::fs::read(&state).unwrap()).unwrap();

@@ -216,7 +216,8 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
     drop(cmd_tx);
     let (back, written) = writer.join().map_err(|_| anyhow::anyhow!("tracking thread panicked"))?;
     written?;
-    let mut diagnostics = vec![front.mlat().report(last, &|k| front.receiver_id(k).to_string())];
+    let name = |k: usize| front.receiver_id(k).to_string();
+    let mut diagnostics = vec![front.mlat().report(last, &name), front.mlat().receivers_line(last, &name)];
     diagnostics.extend(front.delay_report());
     let late = front.late_copies();
     if !late.is_empty() {

@@ -370,6 +370,8 @@ fn core_loop(
     let mut last_ping = Instant::now();
     let mut dispatched = 0u64;
     let (mut next_delay_metrics, mut announced) = (0.0, std::collections::HashSet::new());
+    // The receivers' MLAT line, with the back thread's stats line.
+    let mut next_receivers_line = unix_now() + stats_every;
     let snapshot = |front: &Front, dispatched| report::FrontSnapshot {
         stats: *front.stats(),
         aircraft: front.decoder().stats().aircraft_created,
@@ -435,6 +437,10 @@ fn core_loop(
         if now >= next_delay_metrics {
             next_delay_metrics = now + 1.0;
             report::front_metrics(&front, recorder.as_ref().map(|r| &r.stats), &mut announced);
+        }
+        if now >= next_receivers_line {
+            next_receivers_line = now + stats_every;
+            tracing::info!("{}", front.mlat().receivers_line(now, &|k| front.receiver_id(k).to_string()));
         }
         // The next batch's buffer at this one's size: grown from empty, every
         // batch reallocated it several times (malloc and free were 6% of this

@@ -674,6 +674,14 @@ impl Mlat {
         restored
     }
 
+    /// Every receiver's state in one line (`receivers: id=state/sigma/...`).
+    pub fn receivers_line(&self, now: f64, names: &dyn Fn(usize) -> String) -> String {
+        let all: Vec<String> = (0..self.rxs.len())
+            .map(|k| super::report::summary(&self.receiver_report(k, now), &names(k)))
+            .collect();
+        format!("mlat receivers (state/sigma/offset/outliers/position): {}", all.join(" "))
+    }
+
     /// Receivers known.
     pub fn receiver_count(&self) -> usize {
         self.rxs.len()

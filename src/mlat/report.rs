@@ -24,6 +24,27 @@ impl RxState {
     }
 }
 
+/// One receiver in a line of text (the run report, the service's log):
+/// `id=state/sigma/offset/outliers[/east,north+-sigma]`, `-` where unknown.
+pub fn summary(r: &ReceiverReport, id: &str) -> String {
+    let ns = |v: Option<f64>, plus: bool| match (v, plus) {
+        (Some(v), true) => format!("{v:+.0}ns"),
+        (Some(v), false) => format!("{v:.0}ns"),
+        (None, _) => "-".into(),
+    };
+    let mut s = format!(
+        "{id}={}/{}/{}/{}",
+        r.state.name(),
+        ns(r.sigma_ns, false),
+        ns(r.offset_ns, true),
+        r.outlier_rate.map_or("-".into(), |o| format!("{:.1}%", 100.0 * o))
+    );
+    if let (Some([e, n]), Some(sigma)) = (r.position_offset_en_m, r.position_offset_sigma_m) {
+        s += &format!("/{e:+.0},{n:+.0}m+-{sigma:.0}");
+    }
+    s
+}
+
 #[derive(Clone, Debug, PartialEq)]
 pub struct ReceiverReport {
     /// Data time of the report (s).
@@ -43,4 +64,28 @@ pub struct ReceiverReport {
     /// ([east, north] m), and that estimate's sigma (m).
     pub position_offset_en_m: Option<[f64; 2]>,
     pub position_offset_sigma_m: Option<f64>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_receiver_in_one_word_with_dashes_for_what_is_unknown() {
+        let mut r = ReceiverReport {
+            t: 0.0,
+            rx: 0,
+            state: RxState::Ok,
+            reason: None,
+            sigma_ns: Some(75.4),
+            offset_ns: Some(-47.6),
+            outlier_rate: Some(0.0899),
+            position_offset_en_m: Some([116.2, -82.7]),
+            position_offset_sigma_m: Some(4.4),
+        };
+        assert_eq!(summary(&r, "n06"), "n06=ok/75ns/-48ns/9.0%/+116,-83m+-4");
+        (r.state, r.offset_ns, r.outlier_rate, r.position_offset_en_m) =
+            (RxState::Learning, None, None, None);
+        assert_eq!(summary(&r, "n07"), "n07=learning/75ns/-/-");
+    }
 }
