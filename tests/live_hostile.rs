@@ -4,8 +4,6 @@
 //! service.
 
 use std::net::UdpSocket;
-use std::path::Path;
-use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 mod common;
@@ -21,18 +19,6 @@ fn receiver(id: &str, source: &str, extra: &str) -> String {
         "[[receiver]]\nid = \"{id}\"\nlat = 43.6\nlon = 1.4\nalt_m = 150.0\nclock = \"beast12\"\n\
          source = \"{source}\"\n{extra}\n"
     )
-}
-
-/// The daemon on `cfg`, logging to `log`, its stdout a pipe nobody reads.
-fn daemon_unread_stdout(cfg: &Path, log: &Path) -> std::process::Child {
-    Command::new(env!("CARGO_BIN_EXE_fuse1090"))
-        .args(["run", "--config"])
-        .arg(cfg)
-        .env("RUST_LOG", "info")
-        .stderr(Stdio::from(std::fs::File::create(log).unwrap()))
-        .stdout(Stdio::piped())
-        .spawn()
-        .unwrap()
 }
 
 /// Datagrams of `n` Beast frames each from `src` to `port`, `count` times.

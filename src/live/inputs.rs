@@ -29,7 +29,7 @@ use super::admit::Refusal;
 use super::config::{InputConfig, InputKind};
 pub use super::registry::{Registry, RxCounters};
 use super::ToCore;
-use crate::feed::{parser_for, FeedEvent, FrameParser, InputFormat, RawFrame};
+use crate::feed::{parser_for, FeedEvent, FeedStats, FrameParser, InputFormat, RawFrame};
 
 /// The frames of one datagram or one read (they arrived together, at
 /// `arrival`) to the core as one message: one queue operation and at most
@@ -88,9 +88,16 @@ pub(super) fn forward(
     }
 }
 
-/// The frames a parser made of a read's bytes or a whole datagram (or, with
-/// no bytes and not a datagram, what the end of a stream leaves: a frame
-/// cut off is an error), its errors, garbage and heartbeats counted.
+/// Adds to a receiver's counters what its parser counted between two of
+/// its snapshots: broken frames, garbage bytes, heartbeats.
+pub(super) fn count_parsed(c: &RxCounters, before: &FeedStats, after: &FeedStats) {
+    c.input_errors.fetch_add(after.input_errors() - before.input_errors(), Ordering::Relaxed);
+    c.garbage_bytes.fetch_add(after.garbage_bytes - before.garbage_bytes, Ordering::Relaxed);
+    c.heartbeats.fetch_add(after.heartbeats - before.heartbeats, Ordering::Relaxed);
+}
+
+/// The frames a parser made of a read's bytes or a whole datagram, its
+/// errors, garbage and heartbeats counted.
 fn frames_of(parser: &mut dyn FrameParser, bytes: &[u8], datagram: bool, c: &RxCounters) -> Vec<RawFrame> {
     let mut frames = Vec::new();
     let before = *parser.stats();
@@ -101,15 +108,10 @@ fn frames_of(parser: &mut dyn FrameParser, bytes: &[u8], datagram: bool, c: &RxC
     };
     if datagram {
         parser.push_datagram(bytes, &mut sink);
-    } else if bytes.is_empty() {
-        parser.finish(&mut sink);
     } else {
         parser.push(bytes, &mut sink);
     }
-    let after = parser.stats();
-    c.input_errors.fetch_add(after.input_errors() - before.input_errors(), Ordering::Relaxed);
-    c.garbage_bytes.fetch_add(after.garbage_bytes - before.garbage_bytes, Ordering::Relaxed);
-    c.heartbeats.fetch_add(after.heartbeats - before.heartbeats, Ordering::Relaxed);
+    count_parsed(c, &before, parser.stats());
     frames
 }
 
@@ -151,7 +153,9 @@ pub(super) async fn stream(
             Ok((n, _, arrival)) if n > 0 => (n, arrival),
             end => {
                 // The end, by either side: a frame it cut off is an error.
-                frames_of(parser.as_mut(), &[], false, &c);
+                let before = *parser.stats();
+                parser.finish(&mut |_| {});
+                count_parsed(&c, &before, parser.stats());
                 return end.map(drop);
             }
         };

@@ -70,60 +70,54 @@ pub struct Registry {
     pub metrics_http: Arc<super::metrics_http::HttpCounters>,
 }
 
+/// A receiver and new counters, its rate limit set.
+fn push(w: &mut Vec<(ReceiverConfig, Arc<RxCounters>)>, r: ReceiverConfig) {
+    let c = RxCounters::default();
+    c.admission.set_rate(r.max_rate);
+    w.push((r, Arc::new(c)));
+}
+
 impl Registry {
     /// Adds a receiver (at start or on SIGHUP); returns its index.
     pub fn add(&self, r: ReceiverConfig) -> usize {
-        let c = RxCounters::default();
-        c.admission.set_rate(r.max_rate);
         let mut w = self.receivers.write().expect("registry");
-        w.push((r, Arc::new(c)));
-        self.receiver_count.store(w.len(), Ordering::Relaxed);
+        push(&mut w, r);
+        self.count_configured(&w);
         w.len() - 1
+    }
+
+    /// The fair share is of the receivers configured now, revoked ones left out.
+    fn count_configured(&self, w: &[(ReceiverConfig, Arc<RxCounters>)]) {
+        let n = w.iter().filter(|(_, c)| !c.revoked.load(Ordering::Relaxed)).count();
+        self.receiver_count.store(n, Ordering::Relaxed);
     }
 
     /// A new configuration's receivers (SIGHUP): new ones added (returned,
     /// for the core), known ones updated in place (same index), and those
     /// it no longer names revoked, their connections closed at once.
     pub fn reconfigure(&self, new: &[ReceiverConfig]) -> Vec<ReceiverConfig> {
-        let mut added = Vec::new();
-        {
-            let mut w = self.receivers.write().expect("registry");
-            for (cfg, c) in w.iter_mut() {
-                match new.iter().find(|r| r.id == cfg.id) {
-                    Some(r) => {
-                        c.admission.set_rate(r.max_rate);
-                        c.revoked.store(false, Ordering::Relaxed);
-                        *cfg = r.clone();
-                    }
-                    None => {
-                        if !c.revoked.swap(true, Ordering::Relaxed) {
-                            tracing::info!(
-                                receiver = cfg.id,
-                                "SIGHUP: receiver removed; its connections closed"
-                            );
-                        }
-                        c.revoke.notify_waiters();
-                    }
+        let mut w = self.receivers.write().expect("registry");
+        for (cfg, c) in w.iter_mut() {
+            match new.iter().find(|r| r.id == cfg.id) {
+                Some(r) => {
+                    c.admission.set_rate(r.max_rate);
+                    c.revoked.store(false, Ordering::Relaxed);
+                    *cfg = r.clone();
                 }
-            }
-            for r in new {
-                if !w.iter().any(|(c, _)| c.id == r.id) {
-                    added.push(r.clone());
+                None => {
+                    if !c.revoked.swap(true, Ordering::Relaxed) {
+                        tracing::info!(receiver = cfg.id, "SIGHUP: receiver removed; its connections closed");
+                    }
+                    c.revoke.notify_waiters();
                 }
             }
         }
+        let added: Vec<ReceiverConfig> =
+            new.iter().filter(|r| !w.iter().any(|(c, _)| c.id == r.id)).cloned().collect();
         for r in &added {
-            self.add(r.clone());
+            push(&mut w, r.clone());
         }
-        // The fair share is of the receivers configured now.
-        let active = self
-            .receivers
-            .read()
-            .expect("registry")
-            .iter()
-            .filter(|(_, c)| !c.revoked.load(Ordering::Relaxed))
-            .count();
-        self.receiver_count.store(active, Ordering::Relaxed);
+        self.count_configured(&w);
         self.generation.fetch_add(1, Ordering::Relaxed);
         added
     }

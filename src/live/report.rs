@@ -32,31 +32,30 @@ pub(super) fn front_metrics(
     for (id, n) in front.late_copies() {
         metrics::counter!("fuse1090_receiver_late_copies_total", "receiver" => id.to_string()).absolute(n);
     }
-    // MLAT exclusion is a state, not a sentence: an excluded receiver
-    // is still synchronised and comes back (gauge 1 while it is out).
-    for (id, h) in front.mlat_health() {
-        let id = id.to_string();
-        metrics::gauge!("fuse1090_receiver_mlat_excluded", "receiver" => id.clone())
+    for (rx, (id, h)) in front.mlat_health().enumerate() {
+        // MLAT exclusion is a state, not a sentence: an excluded receiver
+        // is still synchronised and comes back (gauge 1 while it is out).
+        metrics::gauge!("fuse1090_receiver_mlat_excluded", "receiver" => id.to_string())
             .set(h.excluded as u8 as f64);
-        metrics::counter!("fuse1090_receiver_mlat_exclusions_total", "receiver" => id.clone())
-            .absolute(h.exclusions);
-        metrics::counter!("fuse1090_receiver_clock_resets_total", "receiver" => id.clone())
-            .absolute(h.clock_resets);
-        metrics::gauge!("fuse1090_receiver_sync_outlier_rate", "receiver" => id).set(h.outlier_rate);
-    }
-    // What multilateration has learnt of each receiver's timing (absent
-    // until known, as in the track stream's receiver records).
-    for rx in 0..front.mlat().receiver_count() {
+        let counts = [
+            ("fuse1090_receiver_mlat_exclusions_total", h.exclusions),
+            ("fuse1090_receiver_clock_resets_total", h.clock_resets),
+        ];
+        for (name, n) in counts {
+            metrics::counter!(name, "receiver" => id.to_string()).absolute(n);
+        }
+        // What multilateration has learnt of its timing (absent until
+        // known, as in the track stream's receiver records).
         let r = front.mlat().receiver_report(rx, 0.0);
-        let id = front.receiver_id(rx).to_string();
-        let learnt = [
+        let gauges = [
+            ("fuse1090_receiver_sync_outlier_rate", Some(h.outlier_rate)),
             ("fuse1090_receiver_timing_sigma_ns", r.sigma_ns),
             ("fuse1090_receiver_timing_offset_ns", r.offset_ns),
             ("fuse1090_receiver_outlier_rate", r.outlier_rate),
         ];
-        for (name, v) in learnt {
+        for (name, v) in gauges {
             if let Some(v) = v {
-                metrics::gauge!(name, "receiver" => id.clone()).set(v);
+                metrics::gauge!(name, "receiver" => id.to_string()).set(v);
             }
         }
     }
@@ -172,21 +171,18 @@ pub(super) fn metrics(front: &FrontSnapshot, back: &Back, reg: &Registry, output
     // Frames waiting for the core: it fills before anything is dropped.
     metrics::gauge!("fuse1090_queue_frames").set(reg.queued.load(Ordering::Relaxed) as f64);
     for (r, c) in reg.receivers.read().expect("registry").iter() {
-        let id = r.id.clone();
-        metrics::counter!("fuse1090_receiver_frames_total", "receiver" => id.clone())
-            .absolute(c.frames.load(Ordering::Relaxed));
-        metrics::counter!("fuse1090_receiver_input_errors_total", "receiver" => id.clone())
-            .absolute(c.input_errors.load(Ordering::Relaxed));
-        metrics::counter!("fuse1090_receiver_garbage_bytes_total", "receiver" => id.clone())
-            .absolute(c.garbage_bytes.load(Ordering::Relaxed));
-        metrics::counter!("fuse1090_receiver_heartbeats_total", "receiver" => id.clone())
-            .absolute(c.heartbeats.load(Ordering::Relaxed));
-        metrics::counter!("fuse1090_receiver_throttled_total", "receiver" => id.clone())
-            .absolute(c.throttled.load(Ordering::Relaxed));
-        metrics::counter!("fuse1090_receiver_over_share_total", "receiver" => id.clone())
-            .absolute(c.over_share.load(Ordering::Relaxed));
-        metrics::counter!("fuse1090_receiver_queue_drops_total", "receiver" => id)
-            .absolute(c.queue_drops.load(Ordering::Relaxed));
+        let counts = [
+            ("fuse1090_receiver_frames_total", &c.frames),
+            ("fuse1090_receiver_input_errors_total", &c.input_errors),
+            ("fuse1090_receiver_garbage_bytes_total", &c.garbage_bytes),
+            ("fuse1090_receiver_heartbeats_total", &c.heartbeats),
+            ("fuse1090_receiver_throttled_total", &c.throttled),
+            ("fuse1090_receiver_over_share_total", &c.over_share),
+            ("fuse1090_receiver_queue_drops_total", &c.queue_drops),
+        ];
+        for (name, n) in counts {
+            metrics::counter!(name, "receiver" => r.id.clone()).absolute(n.load(Ordering::Relaxed));
+        }
     }
     let f = back.fuser().stats();
     metrics::counter!("fuse1090_tracks_published_total").absolute(f.published);

@@ -28,7 +28,7 @@ use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::{watch, Notify};
 
 use super::config::{BeastId, InputConfig};
-use super::inputs::{forward, stream};
+use super::inputs::{count_parsed, forward, stream};
 use super::registry::Registry;
 use super::ToCore;
 use crate::feed::{parser_for, FeedEvent, FrameParser, InputFormat, RawFrame};
@@ -178,11 +178,8 @@ async fn connection(
         tracing::info!(peer = %peer, receiver = cfg.id, held_back = held, "receiver connected");
     }
     if let Some((frames, arrival, bytes)) = early {
-        let st = parser.stats();
         c.bytes.fetch_add(bytes as u64, Ordering::Relaxed);
-        c.input_errors.fetch_add(st.input_errors(), Ordering::Relaxed);
-        c.garbage_bytes.fetch_add(st.garbage_bytes, Ordering::Relaxed);
-        c.heartbeats.fetch_add(st.heartbeats, Ordering::Relaxed);
+        count_parsed(&c, &Default::default(), parser.stats());
         forward(&sh.tx, reg, &c, rx, arrival, frames);
     }
     let closed = |why: &str| Err(std::io::Error::other(format!("closed: {why}")));

@@ -217,9 +217,6 @@ const CLOCK_JUMP_S: f64 = 5.0;
 /// sync source's (a spoofer that pauses does not become honest).
 pub const AIRCRAFT_TTL_S: f64 = 600.0;
 pub const BANNED_TTL_S: f64 = 86_400.0;
-/// A surveyed position offset beyond this (m, and four of its sigmas) is
-/// reported as a misplaced receiver.
-const MISPLACED_M: f64 = 30.0;
 /// With `self_survey`, a receiver's survey is looked at every this many measurements.
 const SURVEY_CHECK_EVERY: u64 = 200;
 /// Mean normalised innovation beyond which an aircraft is no longer a sync
@@ -419,17 +416,15 @@ impl Mlat {
         // Receivers whose declared position the traffic contradicts.
         let misplaced: Vec<String> = (self.rxs.iter().enumerate())
             .filter_map(|(k, r)| {
-                let o = r.survey.offset()?;
-                let off = o.enu_m[0].hypot(o.enu_m[1]);
-                (off > MISPLACED_M && off > 4.0 * o.sigma_m).then(|| {
-                    format!(
-                        "{} declared {off:.0} m off: {:+.0} m east, {:+.0} m north, +-{:.0} m",
-                        names(k),
-                        o.enu_m[0],
-                        o.enu_m[1],
-                        o.sigma_m
-                    )
-                })
+                let o = r.survey.offset().filter(|o| o.misplaced())?;
+                Some(format!(
+                    "{} declared {:.0} m off: {:+.0} m east, {:+.0} m north, +-{:.0} m",
+                    names(k),
+                    o.horizontal_m(),
+                    o.enu_m[0],
+                    o.enu_m[1],
+                    o.sigma_m
+                ))
             })
             .collect();
         format!(
@@ -574,10 +569,8 @@ impl Mlat {
     /// start again: what they learnt rested on the old position.
     fn apply_survey(&mut self, rx: usize) {
         let r = &self.rxs[rx];
-        let target = r.survey.offset().and_then(|o| {
-            let off = o.enu_m[0].hypot(o.enu_m[1]);
-            (off > MISPLACED_M && off > 4.0 * o.sigma_m).then_some(([o.enu_m[0], o.enu_m[1]], o.sigma_m))
-        });
+        let target =
+            r.survey.offset().filter(|o| o.misplaced()).map(|o| ([o.enu_m[0], o.enu_m[1]], o.sigma_m));
         let moved = match (r.surveyed, target) {
             (None, None) => false,
             (Some(a), Some((t, sigma))) => (a[0] - t[0]).hypot(a[1] - t[1]) > (3.0 * sigma).max(10.0),

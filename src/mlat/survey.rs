@@ -44,12 +44,30 @@ impl Default for Survey {
     }
 }
 
+/// A surveyed offset beyond this (m, and four of its sigmas) is a
+/// misplaced receiver.
+pub const MISPLACED_M: f64 = 30.0;
+
 /// A position offset found: where the antenna is against where it is
 /// declared (east, north, up m), and the horizontal 1-sigma per axis (m).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Offset {
     pub enu_m: [f64; 3],
     pub sigma_m: f64,
+}
+
+impl Offset {
+    /// Its horizontal distance (m).
+    pub fn horizontal_m(&self) -> f64 {
+        self.enu_m[0].hypot(self.enu_m[1])
+    }
+
+    /// Whether the receiver is misplaced, beyond doubt: the run report
+    /// names it, and `self_survey` moves it.
+    pub fn misplaced(&self) -> bool {
+        let off = self.horizontal_m();
+        off > MISPLACED_M && off > 4.0 * self.sigma_m
+    }
 }
 
 impl Survey {

@@ -15,7 +15,7 @@ pub fn bin() -> Command {
 /// The daemon on `cfg`, logging at info level to `log` (and, with
 /// `max_fds`, under that descriptor limit).
 pub fn daemon(cfg: &Path, log: &Path, max_fds: Option<u32>) -> Child {
-    let mut cmd = match max_fds {
+    let cmd = match max_fds {
         Some(n) => {
             let mut c = Command::new("sh");
             c.args(["-c", &format!("ulimit -n {n} && exec \"$0\" \"$@\"")])
@@ -24,11 +24,20 @@ pub fn daemon(cfg: &Path, log: &Path, max_fds: Option<u32>) -> Child {
         }
         None => bin(),
     };
+    run(cmd, cfg, log, Stdio::null())
+}
+
+/// The daemon on `cfg`, logging to `log`, its stdout a pipe nobody reads.
+pub fn daemon_unread_stdout(cfg: &Path, log: &Path) -> Child {
+    run(bin(), cfg, log, Stdio::piped())
+}
+
+fn run(mut cmd: Command, cfg: &Path, log: &Path, stdout: Stdio) -> Child {
     cmd.args(["run", "--config"])
         .arg(cfg)
         .env("RUST_LOG", "info")
         .stderr(Stdio::from(std::fs::File::create(log).unwrap()))
-        .stdout(Stdio::null())
+        .stdout(stdout)
         .spawn()
         .unwrap()
 }
