@@ -143,7 +143,7 @@ fn tma_busy_cut(duration_s: f64, aircraft: usize, mode_s_only: usize, spoofers: 
 }
 
 #[test]
-fn a_misplaced_receiver_is_excluded_and_a_restart_does_not_break_mlat() {
+fn a_misplaced_counter_weighs_little_and_a_restart_does_not_break_mlat() {
     // 40 aircraft for 150 s, two of them spoofers (2 km and 300 m off: the
     // last two); rx08 restarts at 60 s.
     let mut s = tma_busy_cut(150.0, 40, 10, 2);
@@ -162,7 +162,21 @@ fn a_misplaced_receiver_is_excluded_and_a_restart_does_not_break_mlat() {
         health.iter().map(|h| (h.outlier_rate * 100.0).round() / 100.0).collect::<Vec<_>>()
     );
     assert_eq!(rxs[4].id, "rx05");
-    assert!(health[4].excluded, "the receiver declared 300 m off is excluded");
+    eprintln!("{}", mlat.receivers_line(0.0, &|k| rxs[k].id.clone()));
+    // A counter-timed receiver cannot be surveyed (its clock pairs absorb
+    // much of a position error): its learnt timing sigma takes up the rest,
+    // so that its copies weigh little in the fixes. (Its exclusion by its
+    // sync's health, before each receiver's sigma was learnt, came from
+    // its pairs failing against the configured jitter.)
+    let sigma = |k: usize| mlat.timing(k).sigma();
+    let mut others: Vec<f64> = (0..12).filter(|&k| k != 4).map(sigma).collect();
+    others.sort_by(f64::total_cmp);
+    assert!(
+        health[4].excluded || sigma(4) > 4.0 * others[5],
+        "the receiver declared 300 m off weighs as much as the others: {:.0} ns against {:.0} ns",
+        sigma(4) * 1e9,
+        others[5] * 1e9
+    );
     for (k, h) in health.iter().enumerate() {
         if k != 4 {
             assert!(!h.excluded, "{} wrongly excluded", rxs[k].id);
@@ -262,11 +276,12 @@ fn late_copies_of_a_delayed_link_are_not_decoded_again() {
 }
 
 /// A counter-timed receiver whose timestamps step by 2 s (a glitch, not a
-/// restart: under the 5 s that restarts its clock) is excluded while its
-/// pairs fail, keeps synchronising while out, and is back in the fixes a
-/// few minutes later. Its exclusion used to be for good.
+/// restart: under the 5 s that restarts its clock): its pairs see it fail,
+/// start again, and it is back in the fixes within a minute; the aircraft
+/// are not blamed. (Its pairs' failures were once counted against every
+/// receiver in them, which excluded it for minutes; before that, for good.)
 #[test]
-fn a_receiver_whose_timestamps_step_is_excluded_and_comes_back() {
+fn a_receiver_whose_timestamps_step_is_resynchronised_and_stays_in_use() {
     use fuse1090::feed::capture::CaptureWriter;
     let mut s = tma_busy_cut(300.0, 40, 10, 0);
     for r in &mut s.receiver {
@@ -295,16 +310,21 @@ fn a_receiver_whose_timestamps_step_is_excluded_and_comes_back() {
     let (core, events, _) = run_core(&stepped, &CoreConfig::default());
     let h = core.mlat().sync.health[1];
     eprintln!("rx02 after the step: {h:?}; banned sync sources {}", core.mlat().stats.sync_banned_aircraft);
-    assert!(h.exclusions >= 1, "the step went unseen: {h:?}");
+    assert!(h.sync_outliers >= 1, "the step went unseen: {h:?}");
+    let restarted: u64 =
+        (core.mlat().sync.pairs()).filter(|((i, j), _)| *i == 1 || *j == 1).map(|(_, p)| p.restarts).sum();
+    assert!(restarted >= 1, "rx02's pairs did not start again");
     // Its pairs' outliers are the receiver's fault, not the aircraft's.
     assert_eq!(core.mlat().stats.sync_banned_aircraft, 0, "honest aircraft banned as sync sources");
     assert!(!h.excluded, "still excluded at the end: {h:?}");
-    let late_fixes_with_it = events
-        .iter()
-        .filter_map(|e| if let Event::Mlat(f) = e { Some(f) } else { None })
-        .filter(|f| f.t > s.start_unix + 240.0 && f.receivers.contains(&1))
-        .count();
-    assert!(late_fixes_with_it > 50, "rx02 in {late_fixes_with_it} fixes of the last minute");
+    let fixes_with_it = |from: f64, to: f64| {
+        (events.iter())
+            .filter_map(|e| if let Event::Mlat(f) = e { Some(f) } else { None })
+            .filter(|f| (s.start_unix + from..s.start_unix + to).contains(&f.t) && f.receivers.contains(&1))
+            .count()
+    };
+    let (before, after) = (fixes_with_it(0.0, 60.0), fixes_with_it(120.0, 180.0));
+    assert!(after * 2 > before, "rx02 in {before} fixes before the step and {after} after it");
     // The track stream's receiver records: every receiver once a minute and
     // at the end; rx02's say it was out for a while and is back.
     let records: Vec<&fuse1090::mlat::ReceiverReport> =
@@ -313,7 +333,7 @@ fn a_receiver_whose_timestamps_step_is_excluded_and_comes_back() {
     // second's sweep) and at the end, for 12 receivers.
     assert!(records.len() % 12 == 0 && (5..=6).contains(&(records.len() / 12)), "{} records", records.len());
     let rx02: Vec<RxState> = records.iter().filter(|r| r.rx == 1).map(|r| r.state).collect();
-    assert!(rx02.contains(&RxState::Excluded) && rx02.last() == Some(&RxState::Ok), "{rx02:?}");
+    assert!(rx02.iter().all(|s| *s == RxState::Ok), "{rx02:?}");
     let last = records.iter().rev().find(|r| r.rx == 1).unwrap();
     assert!(last.sigma_ns.is_some_and(|s| s > 0.0) && last.offset_ns.is_none(), "{last:?}");
 }
@@ -354,6 +374,41 @@ fn a_misplaced_gps_receiver_is_surveyed_from_the_traffic() {
     let report = core.mlat().report(s.start_unix + s.duration_s, &|k| rxs[k].id.clone());
     let misplaced = report.split("misplaced [").nth(1).unwrap().split(']').next().unwrap();
     assert!(misplaced.starts_with("n06 declared") && !misplaced.contains(';'), "{report}");
+    // Every receiver but the misplaced one in use, and each one's timing
+    // learnt from the data: the Gaussian core apart from the late copies.
+    // A GPS-timed receiver's sigma is its own (within a quarter of the
+    // truth); a counter-timed one's carries its share of the clock
+    // synchronisation's error too (see mlat/timing.rs), within half.
+    for (k, t) in truth.receivers.iter().enumerate() {
+        let r = last[&k];
+        if t.id == "n06" {
+            assert_eq!(r.reason, Some(fuse1090::mlat::Exclusion::Misplaced), "{r:?}");
+            continue;
+        }
+        assert_eq!(r.state, RxState::Ok, "{}: {r:?}", t.id);
+        let learnt = r.sigma_ns.expect("a sigma learnt");
+        let truth_ns = t.timing_sigma_ns();
+        let within = if t.clock == "gps" { 0.25 } else { 0.5 };
+        eprintln!(
+            "{}: sigma {learnt:.0} ns, true {truth_ns:.0} ns; late {:?}, true {}",
+            t.id, r.outlier_rate, t.multipath_prob
+        );
+        assert!(
+            (learnt / truth_ns - 1.0).abs() <= within,
+            "{}: sigma {learnt:.0} ns, true {truth_ns:.0} ns",
+            t.id
+        );
+        // The late share: found where multipath is common enough to be told
+        // from the core's tail (at least half of it), and no more than a few
+        // per cent made up: another receiver's late copy that could not be
+        // left out moves every residual of its fix, and the tightest
+        // receivers see that as lateness of their own.
+        let late = r.outlier_rate.expect("a late share learnt");
+        if t.multipath_prob >= 0.05 && t.multipath_delay_ns >= 3.0 * truth_ns {
+            assert!(late >= 0.5 * t.multipath_prob, "{}: late {late}, true {}", t.id, t.multipath_prob);
+        }
+        assert!(late <= t.multipath_prob + 0.06, "{}: late {late}, true {}", t.id, t.multipath_prob);
+    }
 }
 
 /// With `self_survey`, the misplaced receiver is used where the traffic

@@ -5,6 +5,9 @@
 //! A GPS receiver's offset is only known against the others (a bias common
 //! to all goes into the emission time), so the true offsets are compared
 //! as the learnt ones are reported: against the mean of the GPS receivers'.
+//! A counter-timed receiver's true sigma is its jitter and its 12 MHz
+//! counter's resolution together (a tick's uniform error, 24 ns): the
+//! timing error its copies really carry.
 
 use std::collections::BTreeMap;
 
@@ -21,6 +24,17 @@ pub struct TrueReceiver {
     pub multipath_prob: f64,
     pub multipath_delay_ns: f64,
     pub position_offset_en_m: [f64; 2],
+}
+
+impl TrueReceiver {
+    /// The sigma of its timing error (ns): jitter, and a counter's resolution.
+    pub fn timing_sigma_ns(&self) -> f64 {
+        let tick_ns = 1e3 / 12.0;
+        match self.clock.as_str() {
+            "beast12" => self.sigma_ns.hypot(tick_ns / 12f64.sqrt()),
+            _ => self.sigma_ns,
+        }
+    }
 }
 
 /// One receiver, learnt beside true; learnt values absent where the
@@ -51,7 +65,7 @@ pub fn compare(truth: &[TrueReceiver], latest: &BTreeMap<String, Value>) -> Vec<
             ReceiverRow {
                 id: r.id.clone(),
                 state: rec.and_then(|v| v["state"].as_str()).map(String::from),
-                sigma_ns: r.sigma_ns,
+                sigma_ns: r.timing_sigma_ns(),
                 sigma_learnt_ns: num("sigma_ns"),
                 offset_ns: (r.clock == "gps" && gps.len() >= 2).then_some(r.offset_ns - gps_mean),
                 offset_learnt_ns: num("offset_ns"),

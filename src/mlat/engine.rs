@@ -8,9 +8,10 @@
 //! nothing verified are only trusted when an over-determined fix is
 //! consistent (identical copies at geometrically consistent times).
 
-use super::report::{ReceiverReport, RxState};
+use super::report::{Exclusion, ReceiverReport, RxState};
 use super::state::{LearntReceiver, LearntState};
 use super::survey::{enu_basis, Survey};
+use super::timing::TimingModel;
 use crate::FastMap;
 use std::collections::HashMap;
 
@@ -40,6 +41,16 @@ pub fn baro_height(alt_ft: i32, correction: Option<BaroCorrection>, baro_sigma_m
 /// The receivers of one measurement (more than one when they stand too close
 /// to be separate sites).
 type Site = smallvec::SmallVec<[usize; 2]>;
+
+/// Whether `after` lies within `before`'s uncertainty (99.9%, 3-D).
+fn near(before: &super::solver::Fix, after: &super::solver::Fix) -> bool {
+    let c = nalgebra::Matrix3::from_fn(|r, k| before.cov_ecef[r][k]);
+    let d = nalgebra::Vector3::from_fn(|r, _| after.ecef[r] - before.ecef[r]);
+    c.try_inverse().is_some_and(|inv| (d.transpose() * inv * d)[0] <= 16.27)
+}
+
+/// Copies left out of a fix as outliers: measurement, site, sync variance (s^2).
+type Dropped = GroupVec<(Measurement, Site, f64)>;
 
 #[derive(Clone, Debug, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields, default)]
@@ -178,10 +189,12 @@ struct Rx {
     beast_epoch: Option<u64>,
     /// Last (local time, arrival time) seen, to notice clock jumps.
     last_seen: Option<(f64, f64)>,
-    cal: Calibration,
+    timing: TimingModel,
     /// Its copies that went into fixes, and those left out as outliers.
     copies_used: u64,
     copies_dropped: u64,
+    /// Found misplaced by its survey (without `self_survey`): out of fixes.
+    misplaced: bool,
     /// Where the traffic says its antenna is, and its east-north-up frame.
     survey: Survey,
     enu: [[f64; 3]; 3],
@@ -195,21 +208,6 @@ struct Rx {
     gps_partner: Option<(usize, f64)>,
 }
 
-/// What self-calibration has learnt about a receiver's timing.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Calibration {
-    /// Fixes contributing.
-    pub n: u64,
-    /// Mean timing error (s), removed from its timestamps.
-    pub bias_s: f64,
-    /// Mean squared timing error about the bias (s^2).
-    pub var_s2: f64,
-}
-
-/// A learnt bias is applied only after this many fixes.
-const CAL_MIN: u64 = 20;
-/// Exponential memory of the noise estimate (fixes).
-const CAL_MEMORY: f64 = 200.0;
 /// A receiver clock that disagrees with the server's clock by more than this
 /// (s) between two frames has jumped. Network delays vary by far less.
 const CLOCK_JUMP_S: f64 = 5.0;
@@ -222,30 +220,16 @@ const SURVEY_CHECK_EVERY: u64 = 200;
 /// Mean normalised innovation beyond which an aircraft is no longer a sync
 /// source (honest ones average about 1).
 const SYNC_SOURCE_MAX_NIS: f64 = 6.0;
-/// Step of the bias estimate towards each residual.
-const CAL_STEP: f64 = 0.05;
-/// Weight of the configured jitter in the learnt timing noise (fixes).
-const CAL_PRIOR: f64 = 50.0;
-
 impl Rx {
-    /// Timing sigma (s) to weight this receiver with: the configured jitter
-    /// and the learnt noise, weighted by how much has been learnt.
+    /// Timing sigma (s) to weight this receiver with: its learnt core
+    /// (which starts from the configured jitter), never better than a third
+    /// of the configured one.
     fn sigma(&self) -> f64 {
-        // The configured jitter counts as CAL_PRIOR fixes' worth: a
-        // variance learnt from a few dozen residuals is itself uncertain by
-        // a quarter or more, and weighting the solver by it made fixes worse
-        // and overconfident. Never better than a third of it.
-        let n = self.cal.n as f64;
-        let var = (CAL_PRIOR * self.sigma_t.powi(2) + n * self.cal.var_s2) / (CAL_PRIOR + n);
-        var.sqrt().max(self.sigma_t / 3.0)
+        self.timing.sigma().max(self.sigma_t / 3.0)
     }
 
     fn bias(&self) -> f64 {
-        if self.cal.n >= CAL_MIN {
-            self.cal.bias_s
-        } else {
-            0.0
-        }
+        self.timing.offset()
     }
 }
 
@@ -333,8 +317,8 @@ impl Mlat {
     }
 
     /// What calibration learnt about receiver `rx`.
-    pub fn calibration(&self, rx: usize) -> Calibration {
-        self.rxs[rx].cal
+    pub fn timing(&self, rx: usize) -> TimingModel {
+        self.rxs[rx].timing
     }
 
     pub fn new(cfg: MlatConfig) -> Self {
@@ -368,9 +352,10 @@ impl Mlat {
             beast_epoch: None,
             last_seen: None,
             gps_partner: None,
-            cal: Calibration::default(),
+            timing: TimingModel::prior(jitter * 1e-9),
             copies_used: 0,
             copies_dropped: 0,
+            misplaced: false,
             survey: Survey::default(),
             enu: enu_basis(d.lat, d.lon),
             declared: (d.lat, d.lon, d.alt),
@@ -525,10 +510,14 @@ impl Mlat {
             let Some((t, var)) = t else { continue };
             let rx = &self.rxs[c.rx];
             let w = 1.0 / (var + rx.sigma().powi(2));
-            let e = t - rx.bias() - ecef_distance(rx.ecef, a) / C_AIR;
+            // Without its learnt offset: the survey fits its own constant,
+            // and a misplaced receiver's timing offset, learnt from fixes its
+            // wrong position pulled, is no constant. The reference removes
+            // the others' offsets (below).
+            let e = t - ecef_distance(rx.ecef, a) / C_AIR;
             // An excluded receiver (a misplaced one, say) is surveyed but
             // is no one's reference.
-            emitted.push((c.rx, e, w, !self.sync.health[c.rx].excluded));
+            emitted.push((c.rx, e, w, !self.out_of_fixes(c.rx)));
         }
         let reference = |(sw, swe): (f64, f64), &(_, e, w, r): &(usize, f64, f64, bool)| {
             if r {
@@ -537,13 +526,17 @@ impl Mlat {
                 (sw, swe)
             }
         };
-        let (sw, swe) = emitted.iter().fold((0.0, 0.0), reference);
+        let (sw, swe) = emitted
+            .iter()
+            .map(|&(rx, e, w, r)| (rx, e - self.rxs[rx].bias(), w, r))
+            .fold((0.0, 0.0), |acc, x| reference(acc, &x));
         for &(rx, e, w, in_reference) in &emitted {
             if self.rxs[rx].clock != ClockKind::Gps {
                 continue;
             }
             // The others' emission time, leaving this copy out.
-            let (w_others, swe_others) = if in_reference { (sw - w, swe - w * e) } else { (sw, swe) };
+            let own = e - self.rxs[rx].bias();
+            let (w_others, swe_others) = if in_reference { (sw - w, swe - w * own) } else { (sw, swe) };
             if w_others <= 0.0 || emitted.len() < 3 {
                 continue;
             }
@@ -558,8 +551,37 @@ impl Mlat {
             // error, which moves its range and the others' differently.
             let var = C_AIR * C_AIR * (1.0 / w + 1.0 / w_others) + 2.0 * sigma_a * sigma_a;
             self.rxs[rx].survey.add(u_enu, C_AIR * (e - t_emit), var);
-            if self.cfg.self_survey && self.rxs[rx].survey.count() % SURVEY_CHECK_EVERY == 0 {
-                self.apply_survey(rx);
+            if self.rxs[rx].survey.count() % SURVEY_CHECK_EVERY == 0 {
+                if self.cfg.self_survey {
+                    self.apply_survey(rx);
+                } else {
+                    self.judge_position(rx);
+                }
+            }
+        }
+    }
+
+    /// Without `self_survey`, a receiver its survey finds misplaced is left
+    /// out of fixes (its wrong position would pull each one), and taken back
+    /// if the survey stops saying so.
+    fn judge_position(&mut self, rx: usize) {
+        let r = &mut self.rxs[rx];
+        let offset = r.survey.offset();
+        let misplaced = offset.is_some_and(|o| o.misplaced());
+        if misplaced == r.misplaced {
+            return;
+        }
+        r.misplaced = misplaced;
+        match offset.filter(|_| misplaced) {
+            Some(o) => tracing::warn!(
+                receiver = %r.id,
+                east_m = format!("{:+.0}", o.enu_m[0]),
+                north_m = format!("{:+.0}", o.enu_m[1]),
+                sigma_m = format!("{:.0}", o.sigma_m),
+                "receiver excluded from MLAT: its declared position is wrong (set self_survey = true to use the surveyed one)"
+            ),
+            None => {
+                tracing::info!(receiver = %r.id, "receiver readmitted to MLAT: its survey agrees with its declared position")
             }
         }
     }
@@ -596,8 +618,13 @@ impl Mlat {
     /// What is known of receiver `rx` at data time `t` (see [`ReceiverReport`]).
     pub fn receiver_report(&self, rx: usize, t: f64) -> ReceiverReport {
         let (r, h) = (&self.rxs[rx], &self.sync.health[rx]);
-        let learnt = r.cal.n >= CAL_MIN;
-        let state = if h.excluded {
+        let learnt = r.timing.learnt();
+        let reason = if r.misplaced {
+            Some(Exclusion::Misplaced)
+        } else {
+            h.excluded.then_some(Exclusion::SyncFailing)
+        };
+        let state = if reason.is_some() {
             RxState::Excluded
         } else if learnt || h.sync_updates >= super::sync::HEALTH_MIN_UPDATES {
             RxState::Ok
@@ -607,21 +634,21 @@ impl Mlat {
         // Biases are relative (a common one goes into the emission time):
         // a GPS receiver's is told against the other GPS receivers' mean.
         let gps: Vec<f64> = (self.rxs.iter())
-            .filter(|o| o.clock == ClockKind::Gps && o.cal.n >= CAL_MIN)
-            .map(|o| o.cal.bias_s)
+            .filter(|o| o.clock == ClockKind::Gps && o.timing.learnt())
+            .map(|o| o.timing.offset_s)
             .collect();
         let offset_ns = (r.clock == ClockKind::Gps && learnt && gps.len() >= 2)
-            .then(|| (r.cal.bias_s - gps.iter().sum::<f64>() / gps.len() as f64) * 1e9);
-        let copies = r.copies_used + r.copies_dropped;
+            .then(|| (r.timing.offset_s - gps.iter().sum::<f64>() / gps.len() as f64) * 1e9);
         let offset = r.survey.offset();
         ReceiverReport {
             t,
             rx,
             state,
-            reason: h.excluded.then_some("its clock synchronisation keeps failing"),
-            sigma_ns: learnt.then(|| r.cal.var_s2.sqrt() * 1e9),
+            reason,
+            sigma_ns: learnt.then(|| r.timing.sigma() * 1e9),
             offset_ns,
-            outlier_rate: (copies >= CAL_MIN).then(|| r.copies_dropped as f64 / copies as f64),
+            outlier_rate: learnt.then_some(r.timing.late_rate),
+            late_delay_ns: learnt.then_some(r.timing.late_mean_s * 1e9),
             position_offset_en_m: offset.map(|o| [o.enu_m[0], o.enu_m[1]]),
             position_offset_sigma_m: offset.map(|o| o.sigma_m),
         }
@@ -636,9 +663,11 @@ impl Mlat {
                 lat: r.declared.0,
                 lon: r.declared.1,
                 alt_m: r.declared.2,
-                fixes: r.cal.n,
-                bias_s: r.cal.bias_s,
-                var_s2: r.cal.var_s2,
+                fixes: r.timing.n,
+                bias_s: r.timing.offset_s,
+                var_s2: r.timing.var_s2,
+                late_rate: Some(r.timing.late_rate),
+                late_mean_s: Some(r.timing.late_mean_s),
                 survey: r.survey.snapshot(),
             })
             .collect();
@@ -658,7 +687,14 @@ impl Mlat {
             if !(l.bias_s.is_finite() && l.var_s2.is_finite() && l.var_s2 >= 0.0) {
                 continue;
             }
-            r.cal = Calibration { n: l.fixes, bias_s: l.bias_s, var_s2: l.var_s2 };
+            let prior = TimingModel::prior(r.sigma_t);
+            r.timing = TimingModel {
+                n: l.fixes,
+                offset_s: l.bias_s,
+                var_s2: l.var_s2,
+                late_rate: l.late_rate.filter(|v| (0.0..1.0).contains(v)).unwrap_or(prior.late_rate),
+                late_mean_s: l.late_mean_s.filter(|v| v.is_finite() && *v > 0.0).unwrap_or(prior.late_mean_s),
+            };
             if let Some(s) = Survey::from_snapshot(&l.survey) {
                 r.survey = s;
             }
@@ -727,13 +763,13 @@ impl Mlat {
         // The survey looks at every receiver, excluded ones too (a misplaced
         // receiver is excluded, and is the one to find).
         let mut all_copies = None;
-        if copies.iter().any(|c| self.sync.health[c.rx].excluded) {
+        if copies.iter().any(|c| self.out_of_fixes(c.rx)) {
             if info.adsb_ecef.is_some() && !info.suspect {
                 all_copies = Some(copies.clone());
             }
             let before = copies.len();
             for k in (0..copies.len()).rev() {
-                if self.sync.health[copies[k].rx].excluded {
+                if self.out_of_fixes(copies[k].rx) {
                     copies.remove(k);
                     arrivals.remove(k);
                 }
@@ -770,6 +806,8 @@ impl Mlat {
         // variance) into one measurement with a smaller sigma.
         let mut ms: GroupVec<Measurement> = GroupVec::new();
         let mut sites: GroupVec<Site> = GroupVec::new();
+        // Each measurement's clock synchronisation variance (s^2): not the receiver's own.
+        let mut sync_vars: GroupVec<f64> = GroupVec::new();
         let (mut sync_var, mut self_var, mut all_var) = (0.0, 0.0, 0.0);
         for (c, t) in copies.iter().zip(&times) {
             let Some((t, var)) = t else { continue };
@@ -785,11 +823,13 @@ impl Mlat {
                     let (w1, w2) = (1.0 / ms[k].sigma_t.powi(2), 1.0 / m.sigma_t.powi(2));
                     ms[k].t = (ms[k].t * w1 + m.t * w2) / (w1 + w2);
                     ms[k].sigma_t = (1.0 / (w1 + w2)).sqrt();
+                    sync_vars[k] = sync_vars[k].min(*var);
                     sites[k].push(c.rx);
                 }
                 None => {
                     ms.push(m);
                     sites.push(smallvec::smallvec![c.rx]);
+                    sync_vars.push(*var);
                 }
             }
         }
@@ -840,7 +880,7 @@ impl Mlat {
             }
             return None;
         }
-        let fix = match self.solve_robust(&mut ms, &mut sites, alt, guess) {
+        let (fix, dropped) = match self.solve_robust(&mut ms, &mut sites, &mut sync_vars, alt, guess) {
             Ok(f) => f,
             Err(why) => {
                 self.reject(why);
@@ -857,7 +897,7 @@ impl Mlat {
             return None;
         }
         if self.cfg.calibrate && fix.dof >= 1 {
-            self.learn(&ms, alt, &fix, &sites);
+            self.learn(&ms, alt, &fix, &sites, &sync_vars, &dropped);
         }
         let ac = self.aircraft.entry(info.addr).or_default();
         ac.last_tried = Some(now);
@@ -895,75 +935,155 @@ impl Mlat {
         })
     }
 
-    /// Solves; when the residual test fails and enough sites remain, the site
-    /// with the largest normalised residual is dropped and the fix tried
-    /// again (a receiver glitch, multipath, or a receiver not yet found out
-    /// must not cost the whole transmission).
+    /// Solves, leaving out each copy that is an outlier under its
+    /// receiver's timing model (late by its multipath odds, or off by more
+    /// than any core explains) while the fix stays over-determined: a
+    /// receiver glitch or a reflected path costs that copy, not the
+    /// transmission. Which copy is the outlier is only told with two or more
+    /// degrees of freedom. What remains is rejected only when it has no
+    /// consistent subset (see [`Mlat::consistent`]); otherwise the solver's
+    /// covariance grows with the residuals. Returns the fix and the copies
+    /// left out (measurement, its site, its sync variance).
     fn solve_robust(
         &mut self,
         ms: &mut GroupVec<Measurement>,
         sites: &mut GroupVec<Site>,
+        sync_vars: &mut GroupVec<f64>,
         alt: Option<AltitudeConstraint>,
         guess: Option<[f64; 3]>,
-    ) -> Result<super::solver::Fix, Reject> {
-        let mut result = solve(ms, alt, guess, &self.limits);
-        for _ in 0..2 {
-            // Only while the rest stays checked: at least two degrees of
-            // freedom after the drop (with fewer, which copy is bad is a guess).
-            if result != Err(Reject::Residual) || ms.len() + alt.is_some() as usize - 1 < 4 + 2 {
-                break;
+    ) -> Result<(super::solver::Fix, Dropped), Reject> {
+        let open = SolverLimits { chi2_reject: false, ..self.limits };
+        let mut dropped = Dropped::new();
+        let mut before: Option<super::solver::Fix> = None;
+        loop {
+            let fix = match solve(ms, alt, guess, &open) {
+                Ok(f) => f,
+                Err(why) => {
+                    return before.map_or(Err(why), |b| self.undrop(ms, sites, sync_vars, b, dropped))
+                }
+            };
+            // Without a copy the equations may have another solution that
+            // fits them, far off (with one degree of freedom left, LocaRDS's
+            // went tens of kilometres away): a fix that moved beyond the
+            // uncertainty of the one with the copy is not the same fix.
+            if let Some(b) = before.take() {
+                if !near(&b, &fix) {
+                    return self.undrop(ms, sites, sync_vars, b, dropped);
+                }
             }
-            // Residuals at the least-squares solution, ignoring the test.
-            let lim = SolverLimits { chi2_quantile: 1.0, ..self.limits };
-            let Ok(f) = solve(ms, alt, guess, &lim) else { break };
-            let res = super::solver::residuals(ms, alt, &f);
-            let worst = res
-                .iter()
-                .zip(ms.iter())
-                .map(|((r, h), m)| (r / m.sigma_t).abs() / (1.0 - h).max(0.05).sqrt())
-                .enumerate()
-                .max_by(|a, b| a.1.total_cmp(&b.1))
-                .map(|(k, _)| k);
-            let Some(k) = worst else { break };
-            ms.remove(k);
-            for &rx in &sites.remove(k) {
+            if fix.dof < 3 {
+                return self.consistent(fix, sites, dropped);
+            }
+            let res = super::solver::residuals(ms, alt, &fix);
+            let worst = (res.iter().zip(ms.iter()).zip(sites.iter()).enumerate())
+                .filter_map(|(k, ((&(r, h), m), site))| {
+                    let keep = 1.0 - h.clamp(0.0, 0.95);
+                    let v = self.rxs[site[0]].timing.verdict(r / keep, m.sigma_t.powi(2) / keep);
+                    v.outlier().then_some((k, v.score()))
+                })
+                .max_by(|a, b| a.1.total_cmp(&b.1));
+            let Some((k, _)) = worst else {
+                return self.consistent(fix, sites, dropped);
+            };
+            let (m, site, var) = (ms.remove(k), sites.remove(k), sync_vars.remove(k));
+            for &rx in &site {
                 self.rxs[rx].copies_dropped += 1;
             }
             self.stats.outliers_dropped += 1;
-            result = solve(ms, alt, guess, &self.limits);
+            dropped.push((m, site, var));
+            before = Some(fix);
         }
-        result
     }
 
-    /// Self-calibration: a residual divided by `1 - leverage` is an unbiased
-    /// look at the receiver's own timing error; its mean is the receiver's
-    /// bias, its spread the receiver's noise. A bias common to all receivers
-    /// is absorbed by the emission time, so only relative biases are learnt,
-    /// which is all the solver needs.
+    /// The last copy left out is put back: the fix with it stands.
+    fn undrop(
+        &mut self,
+        ms: &mut GroupVec<Measurement>,
+        sites: &mut GroupVec<Site>,
+        sync_vars: &mut GroupVec<f64>,
+        fix: super::solver::Fix,
+        mut dropped: Dropped,
+    ) -> Result<(super::solver::Fix, Dropped), Reject> {
+        if let Some((m, site, var)) = dropped.pop() {
+            for &rx in &site {
+                self.rxs[rx].copies_dropped -= 1;
+            }
+            self.stats.outliers_dropped -= 1;
+            ms.push(m);
+            sites.push(site);
+            sync_vars.push(var);
+        }
+        self.consistent(fix, sites, dropped)
+    }
+
+    /// A fix whose residuals, once the outliers are out, are beyond what
+    /// sigmas as large as its receivers' learnt ones could be explain (the
+    /// chi-square quantile, times the doubt in the least known receiver's
+    /// variance) has no consistent subset. Within it, the solver's
+    /// covariance grows with the residuals, and the receivers' sigmas with
+    /// what they learn from them.
+    fn consistent(
+        &self,
+        fix: super::solver::Fix,
+        sites: &[Site],
+        dropped: Dropped,
+    ) -> Result<(super::solver::Fix, Dropped), Reject> {
+        let doubt =
+            (sites.iter().flatten()).map(|&rx| self.rxs[rx].timing.variance_doubt()).fold(1.0, f64::max);
+        let limit = super::solver::chi2_quantile(fix.dof, self.limits.chi2_quantile) * doubt;
+        if fix.dof > 0 && fix.chi2 > limit {
+            return Err(Reject::Residual);
+        }
+        Ok((fix, dropped))
+    }
+
+    /// Self-calibration: each copy's residual teaches its receiver's timing
+    /// model (see [`TimingModel::learn`]), those in the fix with their
+    /// leverage, those left out against the fix of the others. A bias
+    /// common to all receivers is absorbed by the emission time, so only
+    /// relative offsets are learnt, which is all the solver needs.
     fn learn(
         &mut self,
         ms: &[Measurement],
         alt: Option<AltitudeConstraint>,
         fix: &super::solver::Fix,
         sites: &[Site],
+        sync_vars: &[f64],
+        dropped: &Dropped,
     ) {
         let res = super::solver::residuals(ms, alt, fix);
-        for (site, &(r, h)) in sites.iter().zip(&res) {
-            if h >= 0.95 {
+        let (mut moved, mut sum): (GroupVec<usize>, f64) = (GroupVec::new(), 0.0);
+        for ((site, &(r, h)), &var) in sites.iter().zip(&res).zip(sync_vars) {
+            // A merged site's residual is no single receiver's.
+            if h >= 0.95 || site.len() > 1 {
                 continue;
             }
-            for &rx in site {
-                let cal = &mut self.rxs[rx].cal;
-                cal.n += 1;
-                // Biases of receivers that share fixes are coupled: a small
-                // step towards each residual (a stochastic gradient) converges
-                // where jumping to r / (1 - h) oscillates.
-                cal.bias_s += CAL_STEP * r;
-                // E[r^2] = sigma^2 (1 - h): the noise variance, by running mean.
-                let a = 1.0 / (cal.n as f64).min(CAL_MEMORY);
-                cal.var_s2 += a * (r * r / (1.0 - h) - cal.var_s2);
+            sum += self.rxs[site[0]].timing.learn(r, h, var);
+            moved.push(site[0]);
+        }
+        for (m, site, var) in dropped {
+            if site.len() > 1 {
+                continue;
+            }
+            let r = m.t - fix.t_emit - ecef_distance(m.pos, fix.ecef) / C_AIR;
+            sum += self.rxs[site[0]].timing.learn(r, 0.0, *var);
+            moved.push(site[0]);
+        }
+        // Only differences of offsets are observed: their common step is
+        // taken back, or it would wander (and the survey, which compares a
+        // receiver's raw time with the others' corrected ones, with it).
+        if !moved.is_empty() {
+            let common = sum / moved.len() as f64;
+            for &rx in &moved {
+                self.rxs[rx].timing.shift(-common);
             }
         }
+    }
+
+    /// A receiver whose copies stay out of fixes: excluded by its sync's
+    /// health, or found misplaced.
+    fn out_of_fixes(&self, rx: usize) -> bool {
+        self.sync.health[rx].excluded || self.rxs[rx].misplaced
     }
 
     /// Aircraft health: the mean normalised innovation of a source's sync
@@ -1006,7 +1126,7 @@ impl Mlat {
         // On the stack: a sync message's dozen heap lists cost as much as
         // its clock filters' updates.
         let ranges: GroupVec<f64> = copies.iter().map(|c| ecef_distance(self.rxs[c.rx].ecef, p)).collect();
-        let var: GroupVec<f64> = copies.iter().map(|c| self.rxs[c.rx].sigma_t.powi(2)).collect();
+        let var: GroupVec<f64> = copies.iter().map(|c| self.rxs[c.rx].sigma().powi(2)).collect();
         // The emitter's position error moves the two ranges differently: by
         // the difference of the unit vectors towards the receivers.
         let units: GroupVec<[f64; 3]> = copies
@@ -1221,7 +1341,8 @@ mod tests {
         }
         // Biases are relative (a common one goes into the emission time).
         let rel = |m: &Mlat, i: usize| {
-            m.rxs[i].cal.bias_s - (0..6).filter(|&j| j != 2).map(|j| m.rxs[j].cal.bias_s).sum::<f64>() / 5.0
+            m.rxs[i].timing.offset_s
+                - (0..6).filter(|&j| j != 2).map(|j| m.rxs[j].timing.offset_s).sum::<f64>() / 5.0
         };
         let b = rel(&m, 2);
         assert!((b - 150e-9).abs() < 15e-9, "learnt bias {b}");
@@ -1286,10 +1407,11 @@ mod tests {
         assert!(crate::geo::distance_m(f.lat, f.lon, 48.75, 2.40) < 5.0);
     }
 
-    /// A counter-timed receiver whose timestamps step by 2 s (less than a
-    /// restart's 5 s) is excluded while its pairs fail, keeps synchronising
-    /// while out, and is readmitted once its sync holds again: exclusion is
-    /// never for good.
+    /// A counter-timed receiver whose timestamps go wild for 100 s (off by
+    /// microseconds each, a failing oscillator) is excluded while its pairs
+    /// fail, keeps synchronising while out, and is readmitted once its sync
+    /// holds again: exclusion is never for good. (A single step of its
+    /// clock is not exclusion: its pairs restart, see the sync's tests.)
     #[test]
     fn an_excluded_receiver_is_readmitted_when_its_sync_holds_again() {
         let (mut m, mut rxs) = engine();
@@ -1306,7 +1428,7 @@ mod tests {
             let (lat, lon) = (48.5 + 0.02 * (k % 23) as f64, 2.1 + 0.03 * (k % 19) as f64);
             let target = geodetic_to_ecef(lat, lon, 30_000.0 * FT_TO_M);
             let mut g = group(&rxs[..5], target, t);
-            let step = if k >= 200 { 2.0 } else { 0.0 };
+            let step = if (200..400).contains(&k) { ((k * 7919) % 13) as f64 * 1e-6 - 6e-6 } else { 0.0 };
             let toa = t - t0 + 100.0 + ecef_distance(c_ecef, target) / C_AIR + step;
             g.copies.push(Copy {
                 rx: 5,

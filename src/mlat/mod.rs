@@ -2,7 +2,7 @@
 //! receivers (late copies of handed-out ones recognised by [`late`]),
 //! [`clock`] synchronisation of receiver pairs and the network time base
 //! ([`sync`]), the TDOA [`solver`], the [`engine`] that turns complete
-//! groups into fixes, and the region's GNSS-baro difference ([`baro`]) that
+//! groups into fixes, each receiver's learnt [`timing`], and the region's GNSS-baro difference ([`baro`]) that
 //! turns barometric altitudes into heights.
 
 pub mod baro;
@@ -16,6 +16,7 @@ pub mod solver;
 pub mod state;
 pub mod survey;
 pub mod sync;
+pub mod timing;
 
 pub use engine::{Mlat, MlatConfig, MlatFix, MlatStats};
-pub use report::{ReceiverReport, RxState};
+pub use report::{Exclusion, ReceiverReport, RxState};

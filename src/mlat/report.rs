@@ -24,6 +24,26 @@ impl RxState {
     }
 }
 
+/// Why a receiver is out of the fixes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Exclusion {
+    /// Its clock pairs keep rejecting its measurements (a broken or
+    /// unstable clock): still synchronised, readmitted when they hold.
+    SyncFailing,
+    /// Its survey says its declared position is wrong (and `self_survey`
+    /// is off, so the surveyed one is not used instead).
+    Misplaced,
+}
+
+impl Exclusion {
+    pub fn name(self) -> &'static str {
+        match self {
+            Exclusion::SyncFailing => "sync_failing",
+            Exclusion::Misplaced => "misplaced",
+        }
+    }
+}
+
 /// One receiver in a line of text (the run report, the service's log):
 /// `id=state/sigma/offset/outliers[/east,north+-sigma]`, `-` where unknown.
 pub fn summary(r: &ReceiverReport, id: &str) -> String {
@@ -32,9 +52,13 @@ pub fn summary(r: &ReceiverReport, id: &str) -> String {
         (Some(v), false) => format!("{v:.0}ns"),
         (None, _) => "-".into(),
     };
+    let state = match r.reason {
+        Some(why) => format!("{}({})", r.state.name(), why.name()),
+        None => r.state.name().to_string(),
+    };
     let mut s = format!(
         "{id}={}/{}/{}/{}",
-        r.state.name(),
+        state,
         ns(r.sigma_ns, false),
         ns(r.offset_ns, true),
         r.outlier_rate.map_or("-".into(), |o| format!("{:.1}%", 100.0 * o))
@@ -53,13 +77,15 @@ pub struct ReceiverReport {
     pub rx: usize,
     pub state: RxState,
     /// Why it is excluded.
-    pub reason: Option<&'static str>,
+    pub reason: Option<Exclusion>,
     /// Its timing sigma (ns), the Gaussian core, from its fixes' residuals.
     pub sigma_ns: Option<f64>,
     /// GPS-timed: its constant offset against the network's other GPS-timed receivers (ns).
     pub offset_ns: Option<f64>,
-    /// The share of its copies left out of fixes as outliers.
+    /// The share of its copies that are late (multipath) by its learnt
+    /// model, and their mean extra delay (ns).
     pub outlier_rate: Option<f64>,
+    pub late_delay_ns: Option<f64>,
     /// Where the traffic says its antenna is against its declared position
     /// ([east, north] m), and that estimate's sigma (m).
     pub position_offset_en_m: Option<[f64; 2]>,
@@ -80,6 +106,7 @@ mod tests {
             sigma_ns: Some(75.4),
             offset_ns: Some(-47.6),
             outlier_rate: Some(0.0899),
+            late_delay_ns: Some(420.0),
             position_offset_en_m: Some([116.2, -82.7]),
             position_offset_sigma_m: Some(4.4),
         };
@@ -87,5 +114,7 @@ mod tests {
         (r.state, r.offset_ns, r.outlier_rate, r.position_offset_en_m) =
             (RxState::Learning, None, None, None);
         assert_eq!(summary(&r, "n07"), "n07=learning/75ns/-/-");
+        (r.state, r.reason) = (RxState::Excluded, Some(Exclusion::Misplaced));
+        assert_eq!(summary(&r, "n07"), "n07=excluded(misplaced)/75ns/-/-");
     }
 }

@@ -39,8 +39,11 @@ pub struct AltitudeConstraint {
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SolverLimits {
-    /// Reject fixes whose residual chi-square exceeds this quantile's value.
+    /// Reject fixes whose residual chi-square exceeds this quantile's value
+    /// (when `chi2_reject`); the quantile also says when a start's fit is
+    /// good enough not to try the others.
     pub chi2_quantile: f64,
+    pub chi2_reject: bool,
     pub max_iterations: usize,
     /// Farther than this from every receiver (m): reject.
     pub max_range_m: f64,
@@ -54,6 +57,7 @@ impl Default for SolverLimits {
     fn default() -> Self {
         SolverLimits {
             chi2_quantile: 0.999,
+            chi2_reject: true,
             // Well-conditioned fixes converge in a handful; a surface target
             // among receivers in one plane can take 30.
             max_iterations: 40,
@@ -291,7 +295,7 @@ pub fn solve(
     let Some((x, nrm, iterations)) = best else {
         return Err(if saw_failure { Reject::Diverged } else { Reject::Singular });
     };
-    if nrm.chi2 > chi2_limit {
+    if limits.chi2_reject && nrm.chi2 > chi2_limit {
         return Err(Reject::Residual);
     }
     let p = [x[0], x[1], x[2]];

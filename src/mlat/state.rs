@@ -6,7 +6,7 @@
 //!
 //! JSON, one object: `{"version":1,"saved_unix":..,"receivers":[{"id":..,
 //! "clock":"gps","lat":..,"lon":..,"alt_m":..,"fixes":..,"bias_s":..,
-//! "var_s2":..,"survey":{...}}]}`. A receiver is restored only if its id,
+//! "var_s2":..,"late_rate":..,"late_mean_s":..,"survey":{...}}]}`. A receiver is restored only if its id,
 //! clock kind and declared position (within a metre) are unchanged: a
 //! receiver moved or reconfigured is learnt afresh.
 
@@ -33,6 +33,12 @@ pub struct LearntReceiver {
     pub fixes: u64,
     pub bias_s: f64,
     pub var_s2: f64,
+    /// Its late copies' share and mean delay (s): absent from files written
+    /// before they were learnt.
+    #[serde(default)]
+    pub late_rate: Option<f64>,
+    #[serde(default)]
+    pub late_mean_s: Option<f64>,
     pub survey: SurveySnapshot,
 }
 

@@ -198,6 +198,9 @@ impl ClockSync {
         now: f64,
     ) -> (f64, u32) {
         let (mut nis_sum, mut judged) = (0.0, 0);
+        // Per copy: its pairs that count for its health, their outliers,
+        // and its partner (the last one: what a lone pair needs).
+        let mut tally: GroupVec<(u32, u32, usize)> = smallvec::smallvec![(0, 0, 0); copies.len()];
         for a in 0..copies.len() {
             for b in a + 1..copies.len() {
                 let (ca, cb) = (copies[a], copies[b]);
@@ -248,9 +251,38 @@ impl ClockSync {
                     nis_sum += nis.min(100.0);
                     judged += 1;
                 }
-                self.note_health(i, outlier && !out_j, now);
-                self.note_health(j, outlier && !out_i, now);
+                let (ka, kb) = if ca.rx == i { (a, b) } else { (b, a) };
+                for (k, other, partner_out) in [(ka, kb, out_j), (kb, ka, out_i)] {
+                    if !partner_out {
+                        tally[k].0 += 1;
+                        tally[k].1 += outlier as u32;
+                        tally[k].2 = other;
+                    }
+                }
             }
+        }
+        // A pair that fails says one of its two is wrong, not which: the
+        // one whose pairs mostly fail is. (Counted against both, a receiver
+        // with multipath dragged its honest partners towards exclusion.) A
+        // copy in one pair only (GPS receivers pair only with counters) is
+        // judged by its partner's verdict, and half when neither can tell.
+        let verdict = |k: usize| {
+            let (pairs, outliers, _) = tally[k];
+            (pairs >= 2).then_some(2 * outliers > pairs)
+        };
+        for (k, c) in copies.iter().enumerate() {
+            let (pairs, outliers, partner) = tally[k];
+            let share = match (pairs, verdict(k)) {
+                (0, _) => continue,
+                (_, Some(bad)) => bad as u8 as f64,
+                _ if outliers == 0 => 0.0,
+                _ => match verdict(partner) {
+                    Some(true) => 0.0,
+                    Some(false) => 1.0,
+                    None => 0.5,
+                },
+            };
+            self.note_health(c.rx, share, now);
         }
         (nis_sum, judged)
     }
@@ -279,11 +311,11 @@ impl ClockSync {
     /// One sync measurement of `rx`'s: its outlier rate, and its exclusion
     /// or readmission when that crosses a threshold (the rare part, apart).
     #[inline]
-    fn note_health(&mut self, rx: usize, outlier: bool, now: f64) {
+    fn note_health(&mut self, rx: usize, outlier: f64, now: f64) {
         let h = &mut self.health[rx];
         h.sync_updates += 1;
-        h.sync_outliers += outlier as u64;
-        h.outlier_rate = 0.97 * h.outlier_rate + 0.03 * outlier as u8 as f64;
+        h.sync_outliers += (outlier >= 0.5) as u64;
+        h.outlier_rate = 0.97 * h.outlier_rate + 0.03 * outlier;
         let turns = if h.excluded { h.outlier_rate < READMIT_RATE } else { h.outlier_rate > EXCLUDE_RATE };
         if turns && h.sync_updates >= HEALTH_MIN_UPDATES {
             self.exclude_or_readmit(rx, now);

@@ -200,12 +200,13 @@ fn receiver(out: &mut Vec<u8>, r: &ReceiverReport, id: &str) {
     o.str("id", id);
     o.str("state", r.state.name());
     if let Some(why) = r.reason {
-        o.str("reason", why);
+        o.str("reason", why.name());
     }
     let fields = [
         ("sigma_ns", r.sigma_ns, 10.0),
         ("offset_ns", r.offset_ns, 10.0),
         ("outlier_rate", r.outlier_rate, 1e4),
+        ("late_delay_ns", r.late_delay_ns, 1.0),
     ];
     for (name, v, scale) in fields {
         if let Some(v) = v {
@@ -569,15 +570,16 @@ mod tests {
     /// A receiver record: what is known, nothing absent written as null.
     #[test]
     fn a_receiver_record_has_what_is_known_and_nothing_else() {
-        use crate::mlat::{ReceiverReport, RxState};
+        use crate::mlat::{Exclusion, ReceiverReport, RxState};
         let mut r = ReceiverReport {
             t: 1_700_000_060.5,
             rx: 1,
             state: RxState::Excluded,
-            reason: Some("its clock synchronisation keeps failing"),
+            reason: Some(Exclusion::SyncFailing),
             sigma_ns: Some(75.44),
             offset_ns: Some(-47.52),
             outlier_rate: Some(0.08991),
+            late_delay_ns: Some(412.4),
             position_offset_en_m: Some([120.04, -89.96]),
             position_offset_sigma_m: Some(12.0),
         };
@@ -587,8 +589,8 @@ mod tests {
         assert_eq!(
             v,
             serde_json::json!({"type":"receiver","t":1_700_000_060.5,"id":"n03","state":"excluded",
-                "reason":"its clock synchronisation keeps failing","sigma_ns":75.4,"offset_ns":-47.5,
-                "outlier_rate":0.0899,"position_offset_en_m":[120.0,-90.0],"position_offset_sigma_m":12.0})
+                "reason":"sync_failing","sigma_ns":75.4,"offset_ns":-47.5,
+                "outlier_rate":0.0899,"late_delay_ns":412.0,"position_offset_en_m":[120.0,-90.0],"position_offset_sigma_m":12.0})
         );
         r = ReceiverReport {
             state: RxState::Learning,
@@ -596,6 +598,7 @@ mod tests {
             sigma_ns: None,
             offset_ns: None,
             outlier_rate: None,
+            late_delay_ns: None,
             position_offset_en_m: None,
             position_offset_sigma_m: None,
             ..r
