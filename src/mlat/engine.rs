@@ -190,9 +190,6 @@ struct Rx {
     /// Last (local time, arrival time) seen, to notice clock jumps.
     last_seen: Option<(f64, f64)>,
     timing: TimingModel,
-    /// Its copies that went into fixes, and those left out as outliers.
-    copies_used: u64,
-    copies_dropped: u64,
     /// Found misplaced by its survey (without `self_survey`): out of fixes.
     misplaced: bool,
     /// Where the traffic says its antenna is, and its east-north-up frame.
@@ -353,8 +350,6 @@ impl Mlat {
             last_seen: None,
             gps_partner: None,
             timing: TimingModel::prior(jitter * 1e-9),
-            copies_used: 0,
-            copies_dropped: 0,
             misplaced: false,
             survey: Survey::default(),
             enu: enu_basis(d.lat, d.lon),
@@ -504,8 +499,9 @@ impl Mlat {
     /// filters absorb much of a position error (tma-busy's receiver declared
     /// 300 m off was found 74 m off, with a sigma of metres).
     fn survey_from(&mut self, copies: &[LocalCopy], times: &[Option<(f64, f64)>], a: [f64; 3], sigma_a: f64) {
-        // (receiver, emission as its copy says, weight, part of the reference)
-        let mut emitted: GroupVec<(usize, f64, f64, bool)> = GroupVec::new();
+        // (receiver, emission as its copy says and with its learnt offset
+        // removed, weight, part of the reference)
+        let mut emitted: GroupVec<(usize, f64, f64, f64, bool)> = GroupVec::new();
         for (c, t) in copies.iter().zip(times) {
             let Some((t, var)) = t else { continue };
             let rx = &self.rxs[c.rx];
@@ -517,26 +513,17 @@ impl Mlat {
             let e = t - ecef_distance(rx.ecef, a) / C_AIR;
             // An excluded receiver (a misplaced one, say) is surveyed but
             // is no one's reference.
-            emitted.push((c.rx, e, w, !self.out_of_fixes(c.rx)));
+            emitted.push((c.rx, e, e - rx.bias(), w, !self.out_of_fixes(c.rx)));
         }
-        let reference = |(sw, swe): (f64, f64), &(_, e, w, r): &(usize, f64, f64, bool)| {
-            if r {
-                (sw + w, swe + w * e)
-            } else {
-                (sw, swe)
-            }
-        };
-        let (sw, swe) = emitted
-            .iter()
-            .map(|&(rx, e, w, r)| (rx, e - self.rxs[rx].bias(), w, r))
-            .fold((0.0, 0.0), |acc, x| reference(acc, &x));
-        for &(rx, e, w, in_reference) in &emitted {
+        let (sw, swe) = (emitted.iter())
+            .filter(|x| x.4)
+            .fold((0.0, 0.0), |(sw, swe), &(_, _, corrected, w, _)| (sw + w, swe + w * corrected));
+        for &(rx, e, corrected, w, in_reference) in &emitted {
             if self.rxs[rx].clock != ClockKind::Gps {
                 continue;
             }
             // The others' emission time, leaving this copy out.
-            let own = e - self.rxs[rx].bias();
-            let (w_others, swe_others) = if in_reference { (sw - w, swe - w * own) } else { (sw, swe) };
+            let (w_others, swe_others) = if in_reference { (sw - w, swe - w * corrected) } else { (sw, swe) };
             if w_others <= 0.0 || emitted.len() < 3 {
                 continue;
             }
@@ -888,9 +875,6 @@ impl Mlat {
             }
         };
         let used: smallvec::SmallVec<[usize; 8]> = sites.iter().flatten().copied().collect();
-        for &rx in &used {
-            self.rxs[rx].copies_used += 1;
-        }
         if !info.addr_known && fix.dof == 0 {
             // Nothing checks an unverified address: no fix from it.
             self.stats.unverified_address += 1;
@@ -977,8 +961,7 @@ impl Mlat {
             let res = super::solver::residuals(ms, alt, &fix);
             let worst = (res.iter().zip(ms.iter()).zip(sites.iter()).enumerate())
                 .filter_map(|(k, ((&(r, h), m), site))| {
-                    let keep = 1.0 - h.clamp(0.0, 0.95);
-                    let v = self.rxs[site[0]].timing.verdict(r / keep, m.sigma_t.powi(2) / keep);
+                    let v = self.rxs[site[0]].timing.judge(r, h, m.sigma_t.powi(2));
                     v.outlier().then_some((k, v.score()))
                 })
                 .max_by(|a, b| a.1.total_cmp(&b.1));
@@ -986,9 +969,6 @@ impl Mlat {
                 return self.consistent(fix, sites, dropped);
             };
             let (m, site, var) = (ms.remove(k), sites.remove(k), sync_vars.remove(k));
-            for &rx in &site {
-                self.rxs[rx].copies_dropped += 1;
-            }
             self.stats.outliers_dropped += 1;
             dropped.push((m, site, var));
             before = Some(fix);
@@ -1005,9 +985,6 @@ impl Mlat {
         mut dropped: Dropped,
     ) -> Result<(super::solver::Fix, Dropped), Reject> {
         if let Some((m, site, var)) = dropped.pop() {
-            for &rx in &site {
-                self.rxs[rx].copies_dropped -= 1;
-            }
             self.stats.outliers_dropped -= 1;
             ms.push(m);
             sites.push(site);

@@ -2,8 +2,9 @@
 //! receivers (late copies of handed-out ones recognised by [`late`]),
 //! [`clock`] synchronisation of receiver pairs and the network time base
 //! ([`sync`]), the TDOA [`solver`], the [`engine`] that turns complete
-//! groups into fixes, each receiver's learnt [`timing`], and the region's GNSS-baro difference ([`baro`]) that
-//! turns barometric altitudes into heights.
+//! groups into fixes, each receiver's learnt [`timing`], and the region's
+//! GNSS-baro difference ([`baro`]) that turns barometric altitudes into
+//! heights.
 
 pub mod baro;
 pub mod clock;

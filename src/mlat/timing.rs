@@ -92,7 +92,7 @@ impl TimingModel {
 
     /// The offset to remove from its timestamps (s): none until learnt.
     pub fn offset(&self) -> f64 {
-        if self.n >= MIN_RESIDUALS {
+        if self.learnt() {
             self.offset_s
         } else {
             0.0
@@ -125,17 +125,26 @@ impl TimingModel {
         Verdict { p_late, z }
     }
 
+    /// How a residual `r` (s) of a copy with leverage `h` in its fix (0 for
+    /// a copy left out, judged against the fix of the others) sits under
+    /// the model, `var_s2` its variance as the fix weighted it: the
+    /// residual and its variance are taken to the leave-one-out ones
+    /// (E[r^2] = sigma^2 (1 - h) in the fit; the leave-one-out residual
+    /// r / (1 - h) has variance sigma^2 / (1 - h)).
+    pub fn judge(&self, r: f64, h: f64, var_s2: f64) -> Verdict {
+        let keep = 1.0 - h.clamp(0.0, 0.95);
+        self.verdict(r / keep, var_s2 / keep)
+    }
+
     /// One residual: `r` (s) at a fix that used the copy (leverage `h`), or
     /// a left-out copy's residual against the fix of the others (`h` 0);
     /// `sync_var_s2` is the clock synchronisation's share of its variance
     /// (beside the model's own in judging it).
     /// Returns the step its offset took (see [`TimingModel::shift`]).
     pub fn learn(&mut self, r: f64, h: f64, sync_var_s2: f64) -> f64 {
+        let v = self.judge(r, h, self.var_s2 + sync_var_s2);
         let h = h.clamp(0.0, 0.95);
         let d = r / (1.0 - h);
-        // E[r^2] = sigma^2 (1 - h) for a copy in the fit; d's variance is sigma^2 / (1 - h).
-        let total = self.var_s2 + sync_var_s2;
-        let v = self.verdict(d, total / (1.0 - h));
         if v.outlier() && v.p_late < 0.5 {
             // Early beyond any core: a glitch (or a wrong position), which
             // says nothing about the core or the tail.
