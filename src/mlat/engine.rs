@@ -304,7 +304,7 @@ impl Mlat {
         let (off, var) = self.sync.edge(rx, partner, local, now)?;
         // In the GPS clock's local seconds, then Unix time (the GPS stamps'
         // own reference offset is removed as in `local_time`).
-        let t = local + off + self.cfg.timestamp_offset_gps_ns * 1e-9;
+        let t = local + off + self.cfg.timestamp_offset_gps_ns * 1e-9 - self.sync.gps_bias(partner);
         Some((epoch_ns as f64 * 1e-9 + t, var))
     }
 
@@ -506,14 +506,19 @@ impl Mlat {
             let Some((t, var)) = t else { continue };
             let rx = &self.rxs[c.rx];
             let w = 1.0 / (var + rx.sigma().powi(2));
-            // Without its learnt offset: the survey fits its own constant,
-            // and a misplaced receiver's timing offset, learnt from fixes its
-            // wrong position pulled, is no constant. The reference removes
-            // the others' offsets (below).
+            // A receiver is surveyed without its learnt offset: the survey
+            // fits its own constant, and a misplaced receiver's timing
+            // offset, learnt from fixes its wrong position pulled, is no
+            // constant. The reference is corrected (a GPS receiver's offset
+            // came off in the common time base, a counter's comes off here).
             let e = t - ecef_distance(rx.ecef, a) / C_AIR;
+            let (raw, corrected) = match rx.clock {
+                ClockKind::Gps => (e + rx.bias(), e),
+                ClockKind::Beast12 => (e, e - rx.bias()),
+            };
             // An excluded receiver (a misplaced one, say) is surveyed but
             // is no one's reference.
-            emitted.push((c.rx, e, e - rx.bias(), w, !self.out_of_fixes(c.rx)));
+            emitted.push((c.rx, raw, corrected, w, !self.out_of_fixes(c.rx)));
         }
         let (sw, swe) = (emitted.iter())
             .filter(|x| x.4)
@@ -687,6 +692,9 @@ impl Mlat {
             }
             restored += 1;
         }
+        for rx in 0..self.rxs.len() {
+            self.sync.set_gps_bias(rx, self.rxs[rx].bias());
+        }
         restored
     }
 
@@ -802,8 +810,9 @@ impl Mlat {
             self_var += var * self.sync.references[c.rx].share_of(info.addr);
             all_var += var + self.rxs[c.rx].sigma().powi(2);
             let rx = &self.rxs[c.rx];
-            let m =
-                Measurement { pos: rx.ecef, t: *t - rx.bias(), sigma_t: (rx.sigma().powi(2) + var).sqrt() };
+            // A GPS receiver's offset came off in the common time base.
+            let offset = if rx.clock == ClockKind::Gps { 0.0 } else { rx.bias() };
+            let m = Measurement { pos: rx.ecef, t: *t - offset, sigma_t: (rx.sigma().powi(2) + var).sqrt() };
             match ms.iter().position(|o| ecef_distance(o.pos, m.pos) < self.cfg.min_separation_m) {
                 Some(k) => {
                     self.stats.close_receivers += 1;
@@ -1053,6 +1062,7 @@ impl Mlat {
             let common = sum / moved.len() as f64;
             for &rx in &moved {
                 self.rxs[rx].timing.shift(-common);
+                self.sync.set_gps_bias(rx, self.rxs[rx].bias());
             }
         }
     }

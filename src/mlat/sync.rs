@@ -122,6 +122,11 @@ pub struct ClockSync {
     /// The receivers' ids, for the log.
     ids: Vec<String>,
     pub references: Vec<Reference>,
+    /// Each GPS-timed receiver's learnt offset against the network (s; zero
+    /// for counters): pair filters relate a counter to a GPS receiver's own
+    /// clock, bias and all, so converting through one GPS receiver or
+    /// another must take their biases' difference into account.
+    gps_bias: Vec<f64>,
     pub stats: SyncStats,
 }
 
@@ -146,6 +151,7 @@ impl ClockSync {
             health: Vec::new(),
             ids: Vec::new(),
             references: Vec::new(),
+            gps_bias: Vec::new(),
             stats: SyncStats::default(),
         }
     }
@@ -156,6 +162,20 @@ impl ClockSync {
         self.gps_peers.push(Vec::new());
         self.health.push(RxHealth::default());
         self.references.push(Reference::default());
+        self.gps_bias.push(0.0);
+    }
+
+    /// Sets a GPS-timed receiver's learnt offset (s); ignored for counters,
+    /// whose pairs absorb any constant.
+    pub fn set_gps_bias(&mut self, rx: usize, bias_s: f64) {
+        if self.clocks[rx] == ClockKind::Gps {
+            self.gps_bias[rx] = bias_s;
+        }
+    }
+
+    /// A receiver's learnt GPS offset (s), zero for a counter.
+    pub fn gps_bias(&self, rx: usize) -> f64 {
+        self.gps_bias[rx]
     }
 
     /// Aircraft `addr`'s ADS-B position was the reference of a sync
@@ -354,7 +374,7 @@ impl ClockSync {
     /// evaluated near `t_i`, with its variance.
     pub(crate) fn edge(&self, i: usize, j: usize, t_i: f64, now: f64) -> Option<(f64, f64)> {
         if self.clocks[i] == ClockKind::Gps && self.clocks[j] == ClockKind::Gps {
-            return Some((0.0, 0.0));
+            return Some((self.gps_bias[j] - self.gps_bias[i], 0.0));
         }
         if i < j {
             let f = self.pairs.get(&(i, j)).filter(|f| f.valid(now, &self.params))?;
@@ -374,9 +394,11 @@ impl ClockSync {
     }
 
     /// Puts a transmission's copies on one time base: the root's clock (a GPS
-    /// receiver when there is one). Returns, per copy index, the time in the
-    /// root's clock and the accumulated variance of the conversion; copies
-    /// the tree cannot reach are `None`. Also returns the root's copy index.
+    /// receiver when there is one), its learnt bias taken off, so that GPS
+    /// receivers' times come out corrected and a counter's the same through
+    /// whichever GPS receiver it is reached. Returns, per copy index, that
+    /// time and the accumulated variance of the conversion; copies the tree
+    /// cannot reach are `None`. Also returns the root's copy index.
     pub fn common_time(&self, copies: &[LocalCopy], now: f64) -> (GroupVec<Option<(f64, f64)>>, usize) {
         let n = copies.len();
         let mut out: GroupVec<Option<(f64, f64)>> = smallvec::smallvec![None; n];
@@ -460,6 +482,13 @@ impl ClockSync {
             let tb_in_a = copies[b].t - off;
             times[b] = Some((ta_root + (tb_in_a - copies[a].t), acc));
             added = b;
+        }
+        // From the root's clock to the network's: its bias taken off.
+        let root_bias = self.gps_bias[copies[root].rx];
+        if root_bias != 0.0 {
+            for (t, _) in out.iter_mut().flatten() {
+                *t -= root_bias;
+            }
         }
         (out, root)
     }
@@ -581,5 +610,37 @@ mod tests {
             assert!(v < 1e-15);
         }
         assert_eq!(s.stats.outliers, 0);
+    }
+
+    #[test]
+    fn a_counter_reached_through_either_gps_receiver_gets_the_same_network_time() {
+        // Two GPS receivers with biases of +250 ns and -300 ns, learnt; a
+        // counter synchronised with each. Its time must not depend on which
+        // of them the tree reaches it through, nor on which is the root.
+        let mut s = ClockSync::new(PairParams::default());
+        s.add_receiver(ClockKind::Gps, "g1");
+        s.add_receiver(ClockKind::Gps, "g2");
+        s.add_receiver(ClockKind::Beast12, "c");
+        let clock = [250e-9, -300e-9, 40.0];
+        s.set_gps_bias(0, clock[0]);
+        s.set_gps_bias(1, clock[1]);
+        s.set_gps_bias(2, 1.0);
+        assert_eq!(s.gps_bias(2), 0.0, "a counter has no GPS bias");
+        let var = [1e-18; 3];
+        let g = [0.0; 9];
+        for k in 0..10 {
+            let t = 1000.0 + k as f64;
+            let copies: Vec<LocalCopy> = (0..3).map(|r| LocalCopy { rx: r, t: t + clock[r] }).collect();
+            s.observe(&copies, &[1000.0; 3], &var, &g, t);
+        }
+        let t = 1010.5;
+        for pair in [[0, 2], [1, 2], [0, 1]] {
+            let copies: Vec<LocalCopy> = pair.iter().map(|&r| LocalCopy { rx: r, t: t + clock[r] }).collect();
+            let (times, _) = s.common_time(&copies, t);
+            for (c, x) in copies.iter().zip(&times) {
+                let (tt, _) = x.unwrap();
+                assert!((tt - t).abs() < 1e-10, "receiver {} through {pair:?}: off by {:e} s", c.rx, tt - t);
+            }
+        }
     }
 }
