@@ -883,6 +883,7 @@ impl Mlat {
                 return None;
             }
         };
+        let fix = self.hedge(&ms, &sites, alt, fix);
         let used: smallvec::SmallVec<[usize; 8]> = sites.iter().flatten().copied().collect();
         if !info.addr_known && fix.dof == 0 {
             // Nothing checks an unverified address: no fix from it.
@@ -982,6 +983,22 @@ impl Mlat {
             dropped.push((m, site, var));
             before = Some(fix);
         }
+    }
+
+    /// The fix hedged against the copies its receivers' models say may be
+    /// late (see [`super::solver::hedge`]); a merged site's time is no
+    /// single receiver's and is taken as it is.
+    fn hedge(
+        &self,
+        ms: &[Measurement],
+        sites: &[Site],
+        alt: Option<AltitudeConstraint>,
+        fix: super::solver::Fix,
+    ) -> super::solver::Fix {
+        super::solver::hedge(ms, alt, &fix, |k, r, h| match sites[k][..] {
+            [rx] => self.rxs[rx].timing.judge(r, h, ms[k].sigma_t.powi(2)).p_late,
+            _ => 0.0,
+        })
     }
 
     /// The last copy left out is put back: the fix with it stands.

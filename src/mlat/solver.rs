@@ -432,6 +432,65 @@ pub fn residuals(ms: &[Measurement], alt: Option<AltitudeConstraint>, fix: &Fix)
         .collect()
 }
 
+/// A fix hedged against copies that may be late without the others being
+/// able to tell. A copy with most of the leverage (a precise receiver among sloppy ones)
+/// pulls the fix wherever its time goes, and when it is late the fix is
+/// off by as much while its covariance, set by that receiver's sigma, says
+/// metres. Under the mixture "copy good" / "copy late, so worthless" the
+/// fix is the leave-one-out fix with probability `p`, the posterior that
+/// the copy is late (`p_late` of the copy's index, residual (s) and
+/// leverage): its covariance grows
+/// by `p` times what leaving the copy out adds plus the spread between the
+/// two fixes, `p (1 - p) d d^T` (each copy taken on its own, linearised
+/// at the fix: Sherman-Morrison on the normal matrix). The position stays:
+/// moved by `p d` towards the fixes without the copies (the mixture's
+/// mean), network-rough's fixes came out worse, and their covariance too
+/// large. A copy the fix cannot stand without (leverage near one) is
+/// taken at 0.999.
+pub fn hedge(
+    ms: &[Measurement],
+    alt: Option<AltitudeConstraint>,
+    fix: &Fix,
+    p_late: impl Fn(usize, f64, f64) -> f64,
+) -> Fix {
+    if fix.dof == 0 {
+        return *fix;
+    }
+    let t0 = ms.iter().map(|m| m.t).fold(f64::INFINITY, f64::min);
+    let x = Vector4::new(fix.ecef[0], fix.ecef[1], fix.ecef[2], C_AIR * (fix.t_emit - t0));
+    let nrm = normal(&x, ms, t0, alt);
+    let Some(inv) = scaled_inverse(&nrm.a) else { return *fix };
+    // The fix's covariance as the solver scaled it.
+    let scale = if nrm.chi2 > chi2_quantile(fix.dof, 0.99) { nrm.chi2 / fix.dof as f64 } else { 1.0 };
+    let p = Vector3::from(fix.ecef);
+    let mut cov = Matrix3::from_fn(|r, c| fix.cov_ecef[r][c]);
+    for (k, m) in ms.iter().enumerate() {
+        let d = p - Vector3::from(m.pos);
+        let r = d.norm().max(1.0);
+        let res = C_AIR * (m.t - t0) - r - x[3];
+        let j = Vector4::new(d[0] / r, d[1] / r, d[2] / r, 1.0);
+        let w = 1.0 / (C_AIR * m.sigma_t).powi(2);
+        let g = inv * j * w;
+        let leverage = (g.transpose() * j)[0];
+        let pl = p_late(k, res / C_AIR, leverage);
+        if pl <= 0.0 {
+            continue;
+        }
+        let keep = (1.0 - leverage).max(0.001);
+        let g3 = g.fixed_rows::<3>(0).into_owned();
+        // Leaving the copy out: the state moves by -g res / keep, the
+        // covariance grows by g g^T / (w keep).
+        let step = g3 * (res / keep);
+        cov +=
+            (g3 * g3.transpose()) * (pl * scale / (w * keep)) + step * step.transpose() * (pl * (1.0 - pl));
+    }
+    let mut out = *fix;
+    let (_, [sp, cp, sl, cl]) = ecef_height_fast(fix.ecef);
+    out.cov_ecef = std::array::from_fn(|r| std::array::from_fn(|c| cov[(r, c)]));
+    out.cov_en = cov_en_of(&cov, [sp, cp, sl, cl]);
+    out
+}
+
 /// Levenberg-Marquardt from `x`.
 fn refine(
     mut x: Vector4<f64>,
@@ -581,6 +640,58 @@ mod tests {
         // get an inflated covariance, which pulls it a little below).
         assert!(nees > 2.6 && nees < 3.2, "{nees}");
         assert!(se / tr > 0.8 && se / tr < 1.1, "{}", se / tr);
+    }
+
+    #[test]
+    fn a_fix_hedged_against_a_precise_receiver_s_late_copies_is_honest() {
+        // Two 20 ns receivers among 300 ns ones carry most of the fix, and
+        // a tenth of the first one's copies arrive late (exponential, mean
+        // 300 ns), which the sloppy ones cannot tell. The fix moves along
+        // the precise pair's hyperbola with the delay while its covariance
+        // says metres there: unhedged, the NEES is four times 3; hedged by
+        // each copy's posterior of being late (under the receiver's true
+        // timing model), it is 3 or a little under (the late case taken as
+        // a copy worth nothing, where a late copy still says "no earlier").
+        let rx = receivers();
+        let target = geodetic_to_ecef(43.55, 1.40, 3000.0);
+        let model = crate::mlat::timing::TimingModel {
+            n: 1000,
+            offset_s: 0.0,
+            var_s2: 20e-9f64.powi(2),
+            late_rate: 0.1,
+            late_mean_s: 300e-9,
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let alt_noise = Gauss::new(0.0, 10.0).unwrap();
+        let (mut plain, mut hedged, mut n) = (0.0, 0.0, 0);
+        let nees = |f: &Fix| {
+            let e = Vector3::from(f.ecef) - Vector3::from(target);
+            (e.transpose() * Matrix3::from_fn(|r, k| f.cov_ecef[r][k]).try_inverse().unwrap() * e)[0]
+        };
+        for _ in 0..3000 {
+            let mut ms = measure(&rx, target, 300e-9, &mut rng);
+            for k in 0..2 {
+                ms[k].sigma_t = 20e-9;
+                ms[k].t = 1000.0 + (Vector3::from(target) - Vector3::from(rx[k])).norm() / C_AIR;
+                ms[k].t += rng.sample::<f64, _>(StandardNormal) * 20e-9;
+            }
+            if rng.gen::<f64>() < model.late_rate {
+                ms[0].t += -(1.0 - rng.gen::<f64>()).ln() * model.late_mean_s;
+            }
+            let alt = Some(AltitudeConstraint { h_m: 3000.0 + alt_noise.sample(&mut rng), sigma_m: 10.0 });
+            let limits = SolverLimits { chi2_reject: false, ..SolverLimits::default() };
+            let Ok(f) = solve(&ms, alt, None, &limits) else { continue };
+            let late = |k, r, h| if k == 0 { model.judge(r, h, 20e-9f64.powi(2)).p_late } else { 0.0 };
+            let g = hedge(&ms, alt, &f, late);
+            assert_eq!(g.ecef, f.ecef, "the hedge moves no fix");
+            plain += nees(&f);
+            hedged += nees(&g);
+            n += 1;
+        }
+        let (plain, hedged) = (plain / n as f64, hedged / n as f64);
+        assert!(n > 2900, "{n}");
+        assert!(plain > 8.0, "unhedged NEES {plain}");
+        assert!((2.3..3.3).contains(&hedged), "hedged NEES {hedged}");
     }
 
     #[test]

@@ -130,9 +130,12 @@ impl TimingModel {
     /// the model, `var_s2` its variance as the fix weighted it: the
     /// residual and its variance are taken to the leave-one-out ones
     /// (E[r^2] = sigma^2 (1 - h) in the fit; the leave-one-out residual
-    /// r / (1 - h) has variance sigma^2 / (1 - h)).
+    /// r / (1 - h) has variance sigma^2 / (1 - h)). The leverage is taken
+    /// as it is up to 0.999: a precise receiver among sloppy ones has 0.99
+    /// and more, and capping it lower made its late copies look checkable
+    /// when they were not.
     pub fn judge(&self, r: f64, h: f64, var_s2: f64) -> Verdict {
-        let keep = 1.0 - h.clamp(0.0, 0.95);
+        let keep = 1.0 - h.clamp(0.0, 0.999);
         self.verdict(r / keep, var_s2 / keep)
     }
 
