@@ -458,3 +458,83 @@ fn self_survey_puts_the_misplaced_receiver_where_it_is() {
     eprintln!("fixes' median error: {declared:.1} m declared, {surveyed:.1} m surveyed");
     assert!(surveyed < 0.9 * declared, "{declared:.1} m declared, {surveyed:.1} m surveyed");
 }
+
+/// network-rough's capture with hostile receivers: n08 sending random
+/// timestamps, n03 (GPS) whose time jumps a second ahead for 100 s and
+/// again for 20 s, n12 declared at 0,0. Without them (n08 and n12 left out
+/// of the capture) is the reference.
+fn hostile(capture: &[u8], start_unix: f64) -> (Vec<u8>, Vec<u8>) {
+    let text = std::str::from_utf8(capture).unwrap();
+    let (mut bad, mut reference) = (String::new(), String::new());
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    for l in text.lines() {
+        let f: Vec<&str> = l.split(' ').collect();
+        let rx = if l.starts_with("receiver") { f[1] } else { f.get(1).copied().unwrap_or("") };
+        if rx != "n08" && rx != "n12" {
+            reference += l;
+            reference.push('\n');
+        }
+        let line = match (rx, l.starts_with("receiver")) {
+            ("n12", true) => "receiver n12 lat=0.00000000 lon=0.00000000 alt=0.00 clock=beast12".to_string(),
+            ("n08", false) => {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                format!("{} n08 <{:012X}{}", f[0], state & 0xFFFF_FFFF_FFFF, &f[2][13..])
+            }
+            ("n03", false) => {
+                let t = f[0].parse::<f64>().unwrap() - start_unix;
+                if (200.0..300.0).contains(&t) || (400.0..420.0).contains(&t) {
+                    let ts = u64::from_str_radix(&f[2][1..13], 16).unwrap() + (1 << 30);
+                    format!("{} n03 <{ts:012X}{}", f[0], &f[2][13..])
+                } else {
+                    l.to_string()
+                }
+            }
+            _ => l.to_string(),
+        };
+        bad += &line;
+        bad.push('\n');
+    }
+    (bad.into_bytes(), reference.into_bytes())
+}
+
+/// Random timestamps, a GPS time jumping by a second, a receiver declared
+/// at 0,0: each found and reported, and the others' fixes as good as
+/// without those receivers at all (no other receiver thought misplaced, no
+/// clock pairs thrown off, the median within 5%).
+#[test]
+fn hostile_receivers_are_found_and_do_not_degrade_the_others() {
+    let s = Scenario::load(&root().join("fixtures/scenarios/network-rough.toml")).unwrap();
+    let (capture, truth_bytes) = sim(&s);
+    let truth = Truth::read(&truth_bytes[..]).unwrap();
+    let (bad, reference) = hostile(&capture, s.start_unix);
+    let median_error = |events: &[Event]| {
+        let mut errs: Vec<f64> = (events.iter())
+            .filter_map(|e| if let Event::Mlat(f) = e { Some(f) } else { None })
+            .filter_map(|f| {
+                let (lat, lon, _) = truth.position(&format!("{:06X}", f.addr), f.t)?;
+                let e = en(lat, lon, f.lat, f.lon);
+                Some(e[0].hypot(e[1]))
+            })
+            .collect();
+        errs.sort_by(f64::total_cmp);
+        errs[errs.len() / 2]
+    };
+    let (core, events, rxs) = run_core(&bad, &CoreConfig::default());
+    let (_, ref_events, _) = run_core(&reference, &CoreConfig::default());
+    let report = core.mlat().report(s.start_unix + s.duration_s, &|k| rxs[k].id.clone());
+    let last: HashMap<String, &fuse1090::mlat::ReceiverReport> = (events.iter())
+        .filter_map(|e| if let Event::Receiver(r) = e { Some((rxs[r.rx].id.clone(), &**r)) } else { None })
+        .collect();
+    use fuse1090::mlat::Exclusion;
+    assert_eq!((last["n08"].state, last["n08"].reason), (RxState::Excluded, Some(Exclusion::TimeJumps)));
+    assert_eq!(last["n12"].state, RxState::Excluded, "{:?}", last["n12"]);
+    assert_eq!(last["n03"].state, RxState::Ok, "n03 back once its time holds: {:?}", last["n03"]);
+    assert!(core.mlat().stats.time_jumps > 1000, "{:?}", core.mlat().stats);
+    let misplaced = report.split("misplaced [").nth(1).unwrap().split(']').next().unwrap();
+    assert!(misplaced.starts_with("n06 declared") && !misplaced.contains(';'), "{report}");
+    let (hostile_m, clean_m) = (median_error(&events), median_error(&ref_events));
+    eprintln!("fix median {hostile_m:.1} m with the hostile receivers, {clean_m:.1} m without them");
+    assert!(hostile_m <= 1.05 * clean_m, "{hostile_m} against {clean_m}");
+}

@@ -168,6 +168,9 @@ pub struct MlatStats {
     pub adsb_skipped: u64,
     /// Copies dropped as outliers so the rest of a transmission could be fixed.
     pub outliers_dropped: u64,
+    /// GPS-timed copies whose time disagreed with the others' by more than
+    /// light takes (see `drop_gps_time_jumps`).
+    pub time_jumps: u64,
     /// Aircraft currently not trusted as sync sources, and the positions refused.
     pub sync_banned_aircraft: u64,
     pub sync_refused: u64,
@@ -203,8 +206,18 @@ struct Rx {
     /// The GPS-timed receiver its clock is best synchronised with, and when
     /// that was last chosen (arrival time).
     gps_partner: Option<(usize, f64)>,
+    /// Recent share of its copies whose time jumped (a counter that
+    /// restarted, a GPS time off by whole seconds from the others').
+    jumps: f64,
 }
 
+/// GPS-timed copies of one transmission further apart than this (s) cannot
+/// be: light crosses any network in a few milliseconds.
+const GPS_AGREE_S: f64 = 0.01;
+/// Weight of each copy in a receiver's recent share of time jumps, and the
+/// share beyond which it is left out of fixes (back once it falls).
+const JUMP_MEMORY: f64 = 0.03;
+const JUMPS_EXCLUDE: f64 = 0.2;
 /// A receiver clock that disagrees with the server's clock by more than this
 /// (s) between two frames has jumped. Network delays vary by far less.
 const CLOCK_JUMP_S: f64 = 5.0;
@@ -349,6 +362,7 @@ impl Mlat {
             beast_epoch: None,
             last_seen: None,
             gps_partner: None,
+            jumps: 0.0,
             timing: TimingModel::prior(jitter * 1e-9),
             misplaced: false,
             survey: Survey::default(),
@@ -409,7 +423,8 @@ impl Mlat {
             .collect();
         format!(
             "mlat: {} fixes from {} groups; pairs {valid}/{total} valid; sync residual ns [{}]; rejects [{}]; \
-             excluded [{}]; misplaced [{}]; sync messages {}, outliers {}, restarts {}; self-synchronised fixes {}",
+             excluded [{}]; misplaced [{}]; sync messages {}, outliers {}, restarts {}; GPS time jumps {}; \
+             self-synchronised fixes {}",
             self.stats.fixes,
             self.stats.groups,
             residuals.join(" "),
@@ -419,6 +434,7 @@ impl Mlat {
             self.stats.sync_messages,
             self.sync.stats.outliers,
             self.sync.stats.restarts,
+            self.stats.time_jumps,
             self.stats.self_synced_fixes
         )
     }
@@ -611,7 +627,9 @@ impl Mlat {
     pub fn receiver_report(&self, rx: usize, t: f64) -> ReceiverReport {
         let (r, h) = (&self.rxs[rx], &self.sync.health[rx]);
         let learnt = r.timing.learnt();
-        let reason = if r.misplaced {
+        let reason = if r.jumps > JUMPS_EXCLUDE {
+            Some(Exclusion::TimeJumps)
+        } else if r.misplaced {
             Some(Exclusion::Misplaced)
         } else {
             h.excluded.then_some(Exclusion::SyncFailing)
@@ -738,10 +756,14 @@ impl Mlat {
                 self.stats.no_timing += 1;
                 continue;
             }
+            let resets = self.sync.health[c.rx].clock_resets;
             let t = self.local_time(c.rx, c.timestamp, c.arrival);
+            let jumped = self.sync.health[c.rx].clock_resets != resets;
+            self.note_jump(c.rx, jumped);
             copies.push(LocalCopy { rx: c.rx, t });
             arrivals.push(c.arrival);
         }
+        self.drop_gps_time_jumps(&mut copies, &mut arrivals);
         if copies.len() < 2 {
             self.stats.too_few_receivers += 1;
             return None;
@@ -1084,10 +1106,56 @@ impl Mlat {
         }
     }
 
+    fn note_jump(&mut self, rx: usize, jumped: bool) {
+        let r = &mut self.rxs[rx];
+        r.jumps += JUMP_MEMORY * (jumped as u8 as f64 - r.jumps);
+    }
+
+    /// GPS-timed copies of one transmission agree to milliseconds (the
+    /// time light takes across any network): one off by more is a GPS time
+    /// that jumped (by whole seconds, typically), and would fail the fix,
+    /// the clock pairs and every GPS receiver's survey with it. Among three
+    /// or more the majority tells which; of two, the one that jumps more
+    /// often, or both when neither does.
+    fn drop_gps_time_jumps(&mut self, copies: &mut GroupVec<LocalCopy>, arrivals: &mut GroupVec<f64>) {
+        let gps: GroupVec<usize> =
+            (0..copies.len()).filter(|&k| self.rxs[copies[k].rx].clock == ClockKind::Gps).collect();
+        if gps.len() < 2 {
+            return;
+        }
+        let mut times: GroupVec<f64> = gps.iter().map(|&k| copies[k].t).collect();
+        times.sort_by(f64::total_cmp);
+        let median = times[times.len() / 2];
+        let mut off: GroupVec<usize> =
+            gps.iter().copied().filter(|&k| (copies[k].t - median).abs() > GPS_AGREE_S).collect();
+        if off.is_empty() {
+            return;
+        }
+        if gps.len() == 2 {
+            let (a, b) = (gps[0], gps[1]);
+            let (ja, jb) = (self.rxs[copies[a].rx].jumps, self.rxs[copies[b].rx].jumps);
+            off = if ja > jb {
+                smallvec::smallvec![a]
+            } else if jb > ja {
+                smallvec::smallvec![b]
+            } else {
+                smallvec::smallvec![a, b]
+            };
+        }
+        for &k in &gps {
+            self.note_jump(copies[k].rx, off.contains(&k));
+        }
+        self.stats.time_jumps += off.len() as u64;
+        for &k in off.iter().rev() {
+            copies.remove(k);
+            arrivals.remove(k);
+        }
+    }
+
     /// A receiver whose copies stay out of fixes: excluded by its sync's
-    /// health, or found misplaced.
+    /// health, found misplaced, or its time jumping.
     fn out_of_fixes(&self, rx: usize) -> bool {
-        self.sync.health[rx].excluded || self.rxs[rx].misplaced
+        self.sync.health[rx].excluded || self.rxs[rx].misplaced || self.rxs[rx].jumps > JUMPS_EXCLUDE
     }
 
     /// Aircraft health: the mean normalised innovation of a source's sync

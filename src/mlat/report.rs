@@ -33,6 +33,9 @@ pub enum Exclusion {
     /// Its survey says its declared position is wrong (and `self_survey`
     /// is off, so the surveyed one is not used instead).
     Misplaced,
+    /// Its time keeps jumping: a counter restarting all the time (or
+    /// sending random timestamps), a GPS time off by whole seconds.
+    TimeJumps,
 }
 
 impl Exclusion {
@@ -40,6 +43,7 @@ impl Exclusion {
         match self {
             Exclusion::SyncFailing => "sync_failing",
             Exclusion::Misplaced => "misplaced",
+            Exclusion::TimeJumps => "time_jumps",
         }
     }
 }
