@@ -758,8 +758,12 @@ impl Mlat {
             }
             let resets = self.sync.health[c.rx].clock_resets;
             let t = self.local_time(c.rx, c.timestamp, c.arrival);
-            let jumped = self.sync.health[c.rx].clock_resets != resets;
-            self.note_jump(c.rx, jumped);
+            // A counter's jump is its restart; a GPS time's is judged
+            // against the others' (below).
+            if self.rxs[c.rx].clock == ClockKind::Beast12 {
+                let jumped = self.sync.health[c.rx].clock_resets != resets;
+                self.note_jump(c.rx, jumped);
+            }
             copies.push(LocalCopy { rx: c.rx, t });
             arrivals.push(c.arrival);
         }
@@ -1128,10 +1132,7 @@ impl Mlat {
         let median = times[times.len() / 2];
         let mut off: GroupVec<usize> =
             gps.iter().copied().filter(|&k| (copies[k].t - median).abs() > GPS_AGREE_S).collect();
-        if off.is_empty() {
-            return;
-        }
-        if gps.len() == 2 {
+        if gps.len() == 2 && !off.is_empty() {
             let (a, b) = (gps[0], gps[1]);
             let (ja, jb) = (self.rxs[copies[a].rx].jumps, self.rxs[copies[b].rx].jumps);
             off = if ja > jb {
