@@ -472,7 +472,7 @@ fn hostile(capture: &[u8], start_unix: f64) -> (Vec<u8>, Vec<u8>) {
     let mut state = 0x9E37_79B9_7F4A_7C15u64;
     for l in text.lines() {
         let f: Vec<&str> = l.split(' ').collect();
-        let rx = if l.starts_with("receiver") { f[1] } else { f.get(1).copied().unwrap_or("") };
+        let rx = f.get(1).copied().unwrap_or("");
         if rx != "n08" && rx != "n12" {
             reference += l;
             reference.push('\n');

@@ -909,7 +909,7 @@ impl Mlat {
                 return None;
             }
         };
-        let fix = self.hedge(&ms, &sites, alt, fix);
+        let (fix, residuals) = self.hedge(&ms, &sites, alt, fix);
         let used: smallvec::SmallVec<[usize; 8]> = sites.iter().flatten().copied().collect();
         if !info.addr_known && fix.dof == 0 {
             // Nothing checks an unverified address: no fix from it.
@@ -917,7 +917,7 @@ impl Mlat {
             return None;
         }
         if self.cfg.calibrate && fix.dof >= 1 {
-            self.learn(&ms, alt, &fix, &sites, &sync_vars, &dropped);
+            self.learn(&residuals, &fix, &sites, &sync_vars, &dropped);
         }
         let ac = self.aircraft.entry(info.addr).or_default();
         ac.last_tried = Some(now);
@@ -1013,14 +1013,15 @@ impl Mlat {
 
     /// The fix hedged against the copies its receivers' models say may be
     /// late (see [`super::solver::hedge`]); a merged site's time is no
-    /// single receiver's and is taken as it is.
+    /// single receiver's and is taken as it is. Also returns the residuals
+    /// and leverages at the fix (see [`super::solver::hedge`]).
     fn hedge(
         &self,
         ms: &[Measurement],
         sites: &[Site],
         alt: Option<AltitudeConstraint>,
         fix: super::solver::Fix,
-    ) -> super::solver::Fix {
+    ) -> (super::solver::Fix, Vec<(f64, f64)>) {
         super::solver::hedge(ms, alt, &fix, |k, r, h| match sites[k][..] {
             [rx] => self.rxs[rx].timing.judge(r, h, ms[k].sigma_t.powi(2)).p_late,
             _ => 0.0,
@@ -1068,21 +1069,20 @@ impl Mlat {
 
     /// Self-calibration: each copy's residual teaches its receiver's timing
     /// model (see [`TimingModel::learn`]), those in the fix with their
-    /// leverage, those left out against the fix of the others. A bias
+    /// leverage (`residuals`, per site), those left out against the fix of
+    /// the others. A bias
     /// common to all receivers is absorbed by the emission time, so only
     /// relative offsets are learnt, which is all the solver needs.
     fn learn(
         &mut self,
-        ms: &[Measurement],
-        alt: Option<AltitudeConstraint>,
+        res: &[(f64, f64)],
         fix: &super::solver::Fix,
         sites: &[Site],
         sync_vars: &[f64],
         dropped: &Dropped,
     ) {
-        let res = super::solver::residuals(ms, alt, fix);
         let (mut moved, mut sum): (GroupVec<usize>, f64) = (GroupVec::new(), 0.0);
-        for ((site, &(r, h)), &var) in sites.iter().zip(&res).zip(sync_vars) {
+        for ((site, &(r, h)), &var) in sites.iter().zip(res).zip(sync_vars) {
             // A merged site's residual is no single receiver's.
             if h >= 0.95 || site.len() > 1 {
                 continue;

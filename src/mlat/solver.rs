@@ -410,26 +410,46 @@ fn cov_en_of(c: &Matrix3<f64>, [sp, cp, sl, cl]: [f64; 4]) -> [[f64; 2]; 2] {
     ]
 }
 
+/// The least-squares problem linearised at a fix: each measurement's
+/// residual (m), Jacobian row and weight, the normal matrix's inverse and
+/// the chi-square. What residuals, leverages and the hedge are read from.
+struct AtFix {
+    rows: Vec<(f64, Vector4<f64>, f64)>,
+    inv: Matrix4<f64>,
+    chi2: f64,
+}
+
+impl AtFix {
+    fn new(ms: &[Measurement], alt: Option<AltitudeConstraint>, fix: &Fix) -> Option<AtFix> {
+        let t0 = ms.iter().map(|m| m.t).fold(f64::INFINITY, f64::min);
+        let x = Vector4::new(fix.ecef[0], fix.ecef[1], fix.ecef[2], C_AIR * (fix.t_emit - t0));
+        let nrm = normal(&x, ms, t0, alt);
+        let inv = scaled_inverse(&nrm.a)?;
+        let p = Vector3::from(fix.ecef);
+        let rows = (ms.iter())
+            .map(|m| {
+                let d = p - Vector3::from(m.pos);
+                let r = d.norm().max(1.0);
+                let res = C_AIR * (m.t - t0) - r - x[3];
+                let j = Vector4::new(d[0] / r, d[1] / r, d[2] / r, 1.0);
+                (res, j, 1.0 / (C_AIR * m.sigma_t).powi(2))
+            })
+            .collect();
+        Some(AtFix { rows, inv, chi2: nrm.chi2 })
+    }
+
+    /// Measurement `k`'s residual (s) and leverage.
+    fn residual(&self, k: usize) -> (f64, f64) {
+        let (res, j, w) = self.rows[k];
+        (res / C_AIR, w * (j.transpose() * self.inv * j)[0])
+    }
+}
+
 /// Per-measurement residuals (s, measured minus modelled) and leverages at a
 /// solution: what self-calibration learns receiver biases and noise from.
 /// A residual shrinks by `1 - leverage` because the fit absorbs part of it.
 pub fn residuals(ms: &[Measurement], alt: Option<AltitudeConstraint>, fix: &Fix) -> Vec<(f64, f64)> {
-    let t0 = ms.iter().map(|m| m.t).fold(f64::INFINITY, f64::min);
-    let x = Vector4::new(fix.ecef[0], fix.ecef[1], fix.ecef[2], C_AIR * (fix.t_emit - t0));
-    let nrm = normal(&x, ms, t0, alt);
-    let Some(inv) = scaled_inverse(&nrm.a) else { return Vec::new() };
-    let p = Vector3::from(fix.ecef);
-    ms.iter()
-        .map(|m| {
-            let d = p - Vector3::from(m.pos);
-            let r = d.norm().max(1.0);
-            let res = C_AIR * (m.t - t0) - r - x[3];
-            let j = Vector4::new(d[0] / r, d[1] / r, d[2] / r, 1.0);
-            let w = 1.0 / (C_AIR * m.sigma_t).powi(2);
-            let h = w * (j.transpose() * inv * j)[0];
-            (res / C_AIR, h)
-        })
-        .collect()
+    AtFix::new(ms, alt, fix).map_or_else(Vec::new, |a| (0..ms.len()).map(|k| a.residual(k)).collect())
 }
 
 /// A fix hedged against copies that may be late without the others being
@@ -446,38 +466,31 @@ pub fn residuals(ms: &[Measurement], alt: Option<AltitudeConstraint>, fix: &Fix)
 /// moved by `p d` towards the fixes without the copies (the mixture's
 /// mean), network-rough's fixes came out worse, and their covariance too
 /// large. A copy the fix cannot stand without (leverage near one) is
-/// taken at 0.999.
+/// taken at 0.999. Also returns each measurement's residual (s) and
+/// leverage at the fix, as [`residuals`] gives them (none for a fix
+/// without redundancy).
 pub fn hedge(
     ms: &[Measurement],
     alt: Option<AltitudeConstraint>,
     fix: &Fix,
     p_late: impl Fn(usize, f64, f64) -> f64,
-) -> Fix {
-    if fix.dof == 0 {
-        return *fix;
-    }
-    let t0 = ms.iter().map(|m| m.t).fold(f64::INFINITY, f64::min);
-    let x = Vector4::new(fix.ecef[0], fix.ecef[1], fix.ecef[2], C_AIR * (fix.t_emit - t0));
-    let nrm = normal(&x, ms, t0, alt);
-    let Some(inv) = scaled_inverse(&nrm.a) else { return *fix };
+) -> (Fix, Vec<(f64, f64)>) {
+    let at = match fix.dof {
+        0 => None,
+        _ => AtFix::new(ms, alt, fix),
+    };
+    let Some(at) = at else { return (*fix, Vec::new()) };
     // The fix's covariance as the solver scaled it.
-    let scale = if nrm.chi2 > chi2_quantile(fix.dof, 0.99) { nrm.chi2 / fix.dof as f64 } else { 1.0 };
-    let p = Vector3::from(fix.ecef);
+    let scale = if at.chi2 > chi2_quantile(fix.dof, 0.99) { at.chi2 / fix.dof as f64 } else { 1.0 };
     let mut cov = Matrix3::from_fn(|r, c| fix.cov_ecef[r][c]);
-    for (k, m) in ms.iter().enumerate() {
-        let d = p - Vector3::from(m.pos);
-        let r = d.norm().max(1.0);
-        let res = C_AIR * (m.t - t0) - r - x[3];
-        let j = Vector4::new(d[0] / r, d[1] / r, d[2] / r, 1.0);
-        let w = 1.0 / (C_AIR * m.sigma_t).powi(2);
-        let g = inv * j * w;
-        let leverage = (g.transpose() * j)[0];
-        let pl = p_late(k, res / C_AIR, leverage);
+    let residuals: Vec<(f64, f64)> = (0..ms.len()).map(|k| at.residual(k)).collect();
+    for (k, (&(r, leverage), &(res, j, w))) in residuals.iter().zip(&at.rows).enumerate() {
+        let pl = p_late(k, r, leverage);
         if pl <= 0.0 {
             continue;
         }
         let keep = (1.0 - leverage).max(0.001);
-        let g3 = g.fixed_rows::<3>(0).into_owned();
+        let g3 = (at.inv * j * w).fixed_rows::<3>(0).into_owned();
         // Leaving the copy out: the state moves by -g res / keep, the
         // covariance grows by g g^T / (w keep).
         let step = g3 * (res / keep);
@@ -488,7 +501,7 @@ pub fn hedge(
     let (_, [sp, cp, sl, cl]) = ecef_height_fast(fix.ecef);
     out.cov_ecef = std::array::from_fn(|r| std::array::from_fn(|c| cov[(r, c)]));
     out.cov_en = cov_en_of(&cov, [sp, cp, sl, cl]);
-    out
+    (out, residuals)
 }
 
 /// Levenberg-Marquardt from `x`.
@@ -682,7 +695,8 @@ mod tests {
             let limits = SolverLimits { chi2_reject: false, ..SolverLimits::default() };
             let Ok(f) = solve(&ms, alt, None, &limits) else { continue };
             let late = |k, r, h| if k == 0 { model.judge(r, h, 20e-9f64.powi(2)).p_late } else { 0.0 };
-            let g = hedge(&ms, alt, &f, late);
+            let (g, res) = hedge(&ms, alt, &f, late);
+            assert_eq!(res, residuals(&ms, alt, &f));
             assert_eq!(g.ecef, f.ecef, "the hedge moves no fix");
             plain += nees(&f);
             hedged += nees(&g);
