@@ -124,6 +124,9 @@ lon = 1.0
 alt_m = 0.0
 clock = "atomic"
 beast_id = "12345"
+[receiver.timing]
+sigma_ns = 30
+late_rate = 1.5
 [[input]]
 kind = "beast_tcp_client"
 address = "127.0.0.1:30005"
@@ -142,6 +145,7 @@ format = "json"
             "[[receiver]] 1 (a): position out of range",
             "[[receiver]] 1 (a): clock",
             "[[receiver]] 1 (a): beast_id = \"12345\": 16 hex digits or a UUID",
+            "[[receiver]] 1 (a): timing: late_rate = 1.5: from 0 to below 1",
             "[[input]] 1: receiver \"nobody\" is not declared",
             "[[output]] 1: udp needs address",
             "[[input]] 2: address 0.0.0.0:0: port 0 is no port",

@@ -7,7 +7,7 @@ mod common;
 
 use std::collections::HashMap;
 
-use common::{en, mahalanobis2, run_core};
+use common::{en, mahalanobis2, run_core, run_core_knowing};
 use fuse1090::core::{Core, CoreConfig, Event};
 use fuse1090::eval::Truth;
 use fuse1090::feed::capture::{CaptureReader, CaptureRecord, ClockKind};
@@ -446,20 +446,28 @@ fn fix_median_error(events: &[Event], truth: &Truth) -> f64 {
 /// With `self_survey`, the misplaced receiver is used where the traffic
 /// says it is: the fixes' median error falls (the median: one aircraft's
 /// fixes can still follow a wrong solution, which is the solver's, not the
-/// survey's, to fix).
+/// survey's, to fix), to within a fifth of an oracle's, a run told every
+/// receiver's true position and timing through the configuration.
 #[test]
-fn self_survey_puts_the_misplaced_receiver_where_it_is() {
+fn self_survey_puts_the_misplaced_receiver_where_it_is_and_learning_nears_the_oracle() {
     let s = Scenario::load(&root().join("fixtures/scenarios/network-rough.toml")).unwrap();
     let (capture, truth_bytes) = sim(&s);
     let truth = Truth::read(&truth_bytes[..]).unwrap();
-    let median_error = |self_survey: bool| {
+    let median_error = |self_survey: bool, known| {
         let mut cfg = CoreConfig::default();
         cfg.mlat.self_survey = self_survey;
-        fix_median_error(&run_core(&capture, &cfg).1, &truth)
+        fix_median_error(&run_core_knowing(&capture, &cfg, known).1, &truth)
     };
-    let (declared, surveyed) = (median_error(false), median_error(true));
-    eprintln!("fixes' median error: {declared:.1} m declared, {surveyed:.1} m surveyed");
+    let oracle = fuse1090::config::Config::parse(&fuse1090::sim::oracle_config(&s), "oracle").unwrap();
+    assert_eq!(oracle.receiver.len(), truth.receivers.len());
+    assert!(oracle.receiver.iter().all(|r| r.timing.is_some()));
+    let (declared, surveyed) = (median_error(false, Vec::new()), median_error(true, Vec::new()));
+    let known = median_error(false, oracle.receiver.iter().map(|r| r.known()).collect());
+    eprintln!("fixes' median error: {declared:.1} m declared, {surveyed:.1} m surveyed, {known:.1} m oracle");
     assert!(surveyed < 0.9 * declared, "{declared:.1} m declared, {surveyed:.1} m surveyed");
+    assert!(surveyed <= 1.2 * known, "{surveyed:.1} m surveyed, {known:.1} m oracle");
+    // The oracle's own use of what it is told: not worse than learning.
+    assert!(known < surveyed, "{surveyed:.1} m surveyed, {known:.1} m oracle");
 }
 
 /// network-rough's capture with hostile receivers: n08 sending random

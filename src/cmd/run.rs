@@ -161,6 +161,7 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
     let mut core_cfg = cfg.core.clone();
     core_cfg.publish_source_tracks = cfg.publish_source_tracks;
     let (mut front, mut back) = Core::stages(&core_cfg);
+    front.know(cfg.receiver.iter().map(|r| r.known()).collect());
     let (cmd_tx, cmd_rx) = std::sync::mpsc::sync_channel::<Batch>(8);
     let writer = named_thread("core-back", move || -> (Back, Result<()>) {
         let mut out = BufWriter::with_capacity(1 << 20, out_file);

@@ -1,4 +1,6 @@
-//! `fuse1090 sim --scenario FILE --out DIR`: writes DIR/capture.txt and DIR/truth.jsonl.
+//! `fuse1090 sim --scenario FILE --out DIR`: writes DIR/capture.txt,
+//! DIR/truth.jsonl and DIR/oracle.toml (every receiver's true position and
+//! timing, as a configuration for an oracle run).
 
 use std::fs::File;
 use std::io::BufWriter;
@@ -20,6 +22,9 @@ pub fn run(scenario: &Path, out: &Path) -> Result<()> {
         ))
     };
     let stats = simulate(&s, create("capture.txt")?, create("truth.jsonl")?)?;
+    let oracle = out.join("oracle.toml");
+    std::fs::write(&oracle, crate::sim::oracle_config(&s))
+        .with_context(|| format!("cannot write {}", oracle.display()))?;
     super::print_stdout(&format!(
         "sim: {} receivers, {} aircraft, {} transmissions, {} receptions, {} truth lines -> {}\n",
         stats.receivers,

@@ -23,6 +23,7 @@ use crate::geo::{FT_TO_M, KT_TO_MS};
 use crate::mlat::baro::{BaroCorrection, RegionalBaro};
 use crate::mlat::engine::baro_height;
 use crate::mlat::group::{Added, Group, GroupInfo, Grouper};
+use crate::mlat::timing::KnownTiming;
 use crate::mlat::Mlat;
 use crate::modes::nic::{nacp_epu_m, nucp_hpl_m};
 use crate::modes::{Body, Decoder, DecoderConfig, Es};
@@ -84,6 +85,17 @@ pub struct Front {
     /// Time-of-applicability sigma of ADS-B positions: GPS-timed, arrival-timed (s).
     time_sigma: (f64, f64),
     sync_inflation: f64,
+    /// Receivers the configuration describes: what it says of them (its
+    /// position and clock, and its timing when given) wins over their
+    /// declaration in a capture.
+    known: Vec<KnownReceiver>,
+}
+
+/// A receiver as the configuration describes it.
+#[derive(Clone, Debug)]
+pub struct KnownReceiver {
+    pub decl: ReceiverDecl,
+    pub timing: Option<KnownTiming>,
 }
 
 impl Front {
@@ -111,11 +123,24 @@ impl Front {
             baro: RegionalBaro::default(),
             time_sigma: (cfg.track.adsb_time_sigma_gps_s, cfg.track.adsb_time_sigma_arrival_s),
             sync_inflation: cfg.track.mlat_sync_inflation,
+            known: Vec::new(),
         }
     }
 
-    pub fn add_receiver(&mut self, decl: ReceiverDecl, cmds: &mut Vec<Cmd>) -> usize {
+    /// Receivers the configuration describes, for those added after.
+    pub fn know(&mut self, known: Vec<KnownReceiver>) {
+        self.known = known;
+    }
+
+    pub fn add_receiver(&mut self, mut decl: ReceiverDecl, cmds: &mut Vec<Cmd>) -> usize {
+        let known = self.known.iter().find(|k| k.decl.id == decl.id);
+        if let Some(k) = known {
+            decl = k.decl.clone();
+        }
         self.mlat.add_receiver(&decl);
+        if let Some(t) = known.and_then(|k| k.timing.as_ref()) {
+            self.mlat.set_known_timing(self.receivers.len(), t);
+        }
         cmds.push(Cmd::Receiver(decl.id.clone()));
         self.receivers.push(RxState {
             decl,

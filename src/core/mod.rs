@@ -186,6 +186,11 @@ impl Core {
         self.back.apply(self.cmds.drain(..), out);
     }
 
+    /// Receivers the configuration describes (see [`Front::know`]).
+    pub fn know(&mut self, known: Vec<front::KnownReceiver>) {
+        self.front.know(known);
+    }
+
     pub fn add_receiver(&mut self, decl: ReceiverDecl) -> usize {
         let rx = self.front.add_receiver(decl, &mut self.cmds);
         self.run(&mut Vec::new());

@@ -7,6 +7,8 @@ use std::net::{IpAddr, SocketAddr};
 use serde::{Deserialize, Serialize};
 
 use crate::feed::capture::{ClockKind, ReceiverDecl};
+use crate::core::front::KnownReceiver;
+use crate::mlat::timing::KnownTiming;
 
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
@@ -92,6 +94,9 @@ pub struct ReceiverConfig {
     /// Most frames per second accepted from it; more are dropped and counted (0: no limit).
     #[serde(default)]
     pub max_rate: f64,
+    /// Its timing, when known: taken as it is instead of learnt.
+    #[serde(default)]
+    pub timing: Option<KnownTiming>,
 }
 
 /// A receiver's name in its Beast stream (readsb's 0xe3 or 0xe4 frame).
@@ -162,12 +167,18 @@ impl ReceiverConfig {
             beast_id: beast_id.map(Into::into),
             beast_id_takeover: false,
             max_rate: 0.0,
+            timing: None,
         }
     }
 
     pub fn decl(&self) -> ReceiverDecl {
         let clock = if self.clock == "gps" { ClockKind::Gps } else { ClockKind::Beast12 };
         ReceiverDecl { id: self.id.clone(), lat: self.lat, lon: self.lon, alt: self.alt_m, clock }
+    }
+
+    /// What the core is told of it.
+    pub fn known(&self) -> KnownReceiver {
+        KnownReceiver { decl: self.decl(), timing: self.timing }
     }
 }
 
@@ -345,6 +356,9 @@ pub fn validate(
         }
         if !(r.max_rate >= 0.0 && r.max_rate.is_finite()) {
             errs.push(format!("{at}: max_rate must be zero or positive"));
+        }
+        if let Some(Err(e)) = r.timing.map(|t| t.check()) {
+            errs.push(format!("{at}: timing: {e}"));
         }
     }
     let known = |id: &str| receivers.iter().any(|r| r.id == id);

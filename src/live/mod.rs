@@ -35,6 +35,7 @@ use anyhow::{Context, Result};
 
 use crate::config::Config;
 use crate::core::{Back, Cmd, Core, Event, Front};
+use crate::core::front::KnownReceiver;
 use crate::feed::capture::ReceiverDecl;
 use crate::feed::RawFrame;
 use config::InputConfig;
@@ -167,7 +168,7 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
     let mut decls = Vec::new();
     for r in &cfg.receiver {
         registry.add(r.clone());
-        decls.push(r.decl());
+        decls.push(r.known());
     }
     let outputs = Outputs::new(&cfg.output, &cfg.service);
     let recorder = match cfg.service.record.as_str() {
@@ -328,7 +329,7 @@ const STAGE_QUEUE: usize = 64;
 /// recording, and the watchdog (a stalled back thread blocks it too).
 fn core_loop(
     cfg: crate::core::CoreConfig,
-    decls: Vec<ReceiverDecl>,
+    decls: Vec<KnownReceiver>,
     outputs: Outputs,
     mut recorder: Option<Recorder>,
     rx: Receiver<ToCore>,
@@ -337,7 +338,8 @@ fn core_loop(
 ) {
     let (mut front, back) = Core::stages(&cfg);
     let mut cmds = Vec::new();
-    for d in decls {
+    front.know(decls.clone());
+    for KnownReceiver { decl: d, .. } in decls {
         if let Some(r) = &mut recorder {
             r.receiver(&d, unix_now());
         }

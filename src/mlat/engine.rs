@@ -11,7 +11,7 @@
 use super::report::{Exclusion, ReceiverReport, RxState};
 use super::state::{LearntReceiver, LearntState};
 use super::survey::{enu_basis, Survey};
-use super::timing::TimingModel;
+use super::timing::{KnownTiming, TimingModel};
 use crate::FastMap;
 use std::collections::HashMap;
 
@@ -193,6 +193,8 @@ struct Rx {
     /// Last (local time, arrival time) seen, to notice clock jumps.
     last_seen: Option<(f64, f64)>,
     timing: TimingModel,
+    /// Its timing given by the configuration: not learnt.
+    timing_known: bool,
     /// Found misplaced by its survey (without `self_survey`): out of fixes.
     misplaced: bool,
     /// Where the traffic says its antenna is, and its east-north-up frame.
@@ -364,6 +366,7 @@ impl Mlat {
             gps_partner: None,
             jumps: 0.0,
             timing: TimingModel::prior(jitter * 1e-9),
+            timing_known: false,
             misplaced: false,
             survey: Survey::default(),
             enu: enu_basis(d.lat, d.lon),
@@ -372,6 +375,16 @@ impl Mlat {
             surveyed: None,
         });
         self.sync.add_receiver(d.clock, &d.id);
+    }
+
+    /// Takes receiver `rx`'s timing as given, from now on, instead of
+    /// learning it.
+    pub fn set_known_timing(&mut self, rx: usize, known: &KnownTiming) {
+        let r = &mut self.rxs[rx];
+        r.timing = known.model();
+        r.sigma_t = r.timing.sigma();
+        r.timing_known = true;
+        self.sync.set_gps_bias(rx, self.rxs[rx].bias());
     }
 
     /// An altitude heard from an aircraft (any message), for later
@@ -689,6 +702,9 @@ impl Mlat {
     pub fn restore(&mut self, state: &LearntState) -> usize {
         let mut restored = 0;
         for r in &mut self.rxs {
+            if r.timing_known {
+                continue;
+            }
             let Some(l) = state.receivers.iter().find(|l| l.id == r.id) else { continue };
             let same_place = geodetic_to_ecef(l.lat, l.lon, l.alt_m);
             if l.clock != r.clock.name() || ecef_distance(same_place, r.declared_ecef) > 1.0 {
@@ -1084,14 +1100,14 @@ impl Mlat {
         let (mut moved, mut sum): (GroupVec<usize>, f64) = (GroupVec::new(), 0.0);
         for ((site, &(r, h)), &var) in sites.iter().zip(res).zip(sync_vars) {
             // A merged site's residual is no single receiver's.
-            if h >= 0.95 || site.len() > 1 {
+            if h >= 0.95 || site.len() > 1 || self.rxs[site[0]].timing_known {
                 continue;
             }
             sum += self.rxs[site[0]].timing.learn(r, h, var);
             moved.push(site[0]);
         }
         for (m, site, var) in dropped {
-            if site.len() > 1 {
+            if site.len() > 1 || self.rxs[site[0]].timing_known {
                 continue;
             }
             let r = m.t - fix.t_emit - ecef_distance(m.pos, fix.ecef) / C_AIR;

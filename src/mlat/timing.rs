@@ -51,6 +51,59 @@ pub struct TimingModel {
     pub late_mean_s: f64,
 }
 
+/// A receiver's timing as the configuration gives it (`[receiver.timing]`):
+/// taken as it is and never learnt. For a receiver whose timing was measured
+/// elsewhere, and for oracle runs that tell how far learning falls short of
+/// knowing (`sim` writes one for each scenario).
+#[derive(Clone, Copy, Debug, serde::Deserialize, serde::Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct KnownTiming {
+    /// Its timing noise, 1 sigma (ns).
+    pub sigma_ns: f64,
+    /// Its constant offset against the network (ns), removed from its times.
+    #[serde(default)]
+    pub offset_ns: f64,
+    /// Share of its copies late (multipath), and their mean extra delay (ns).
+    #[serde(default)]
+    pub late_rate: f64,
+    #[serde(default = "KnownTiming::default_late_delay_ns")]
+    pub late_delay_ns: f64,
+}
+
+impl KnownTiming {
+    fn default_late_delay_ns() -> f64 {
+        PRIOR_LATE_MEAN_S * 1e9
+    }
+
+    /// What is wrong with it, if anything.
+    pub fn check(&self) -> Result<(), String> {
+        if !(self.sigma_ns > 0.0 && self.sigma_ns.is_finite()) {
+            return Err(format!("sigma_ns = {}: positive", self.sigma_ns));
+        }
+        if !self.offset_ns.is_finite() {
+            return Err("offset_ns must be finite".into());
+        }
+        if !(0.0..1.0).contains(&self.late_rate) {
+            return Err(format!("late_rate = {}: from 0 to below 1", self.late_rate));
+        }
+        if !(self.late_delay_ns > 0.0 && self.late_delay_ns.is_finite()) {
+            return Err(format!("late_delay_ns = {}: positive", self.late_delay_ns));
+        }
+        Ok(())
+    }
+
+    /// The model it stands for, counted as learnt.
+    pub fn model(&self) -> TimingModel {
+        TimingModel {
+            n: MEMORY as u64,
+            offset_s: self.offset_ns * 1e-9,
+            var_s2: (self.sigma_ns * 1e-9).powi(2),
+            late_rate: self.late_rate,
+            late_mean_s: self.late_delay_ns * 1e-9,
+        }
+    }
+}
+
 /// How a residual sits under a receiver's model.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Verdict {

@@ -194,6 +194,41 @@ fn radio_horizon_m(h1: f64, h2: f64) -> f64 {
     4_120.0 * (h1.max(0.0).sqrt() + h2.max(0.0).sqrt()) + 5_000.0
 }
 
+/// A configuration that gives fuse1090 every receiver's true position and
+/// timing (`[[receiver]]` with `[receiver.timing]`): an oracle run with it
+/// shows what learning the network costs against knowing it.
+pub fn oracle_config(s: &Scenario) -> String {
+    use std::fmt::Write as _;
+    let mut out = String::from(
+        "# Every receiver's true position and timing in this scenario, for an oracle run:\n\
+         # fuse1090 run --config oracle.toml --capture capture.txt --output OUT\n",
+    );
+    for r in all_receivers(s) {
+        // The timestamps' rounding is noise too: a counter's 12 MHz tick,
+        // a GPS time's nanosecond. A counter's constant offset is its clock's.
+        let (tick_s, offset_ns) = match r.clock {
+            crate::feed::capture::ClockKind::Beast12 => (1.0 / 12e6, 0.0),
+            crate::feed::capture::ClockKind::Gps => (1e-9, r.bias_ns),
+        };
+        let sigma_ns = ((r.jitter_ns * 1e-9).powi(2) + tick_s * tick_s / 12.0).sqrt() * 1e9;
+        let _ = write!(
+            out,
+            "\n[[receiver]]\nid = \"{}\"\nlat = {:.8}\nlon = {:.8}\nalt_m = {:.2}\nclock = \"{}\"\n\
+             [receiver.timing]\nsigma_ns = {:.3}\noffset_ns = {:.3}\nlate_rate = {}\nlate_delay_ns = {}\n",
+            r.id,
+            r.lat,
+            r.lon,
+            r.alt_m,
+            r.clock.name(),
+            sigma_ns,
+            offset_ns,
+            r.multipath_prob,
+            if r.multipath_prob > 0.0 { r.multipath_delay_ns } else { 300.0 },
+        );
+    }
+    out
+}
+
 /// Runs the scenario, writing the capture and the truth.
 pub fn simulate(s: &Scenario, capture: impl Write, mut truth: impl Write) -> Result<SimStats> {
     let receivers = all_receivers(s);

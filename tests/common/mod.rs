@@ -88,8 +88,18 @@ use fuse1090::feed::capture::{CaptureReader, CaptureRecord, ReceiverDecl};
 /// Runs a capture through a core in-process; returns the core (for its
 /// statistics), every event, and the receivers in declaration order.
 pub fn run_core(capture: &[u8], cfg: &CoreConfig) -> (Core, Vec<Event>, Vec<ReceiverDecl>) {
+    run_core_knowing(capture, cfg, Vec::new())
+}
+
+/// [`run_core`] with receivers described as a configuration would.
+pub fn run_core_knowing(
+    capture: &[u8],
+    cfg: &CoreConfig,
+    known: Vec<fuse1090::core::front::KnownReceiver>,
+) -> (Core, Vec<Event>, Vec<ReceiverDecl>) {
     let mut reader = CaptureReader::new(capture, "capture");
     let mut core = Core::new(cfg);
+    core.know(known);
     let mut events = Vec::new();
     let mut rxs = Vec::new();
     while let Some(rec) = reader.next_record().unwrap() {
