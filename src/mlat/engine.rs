@@ -11,7 +11,7 @@
 use super::report::{Exclusion, ReceiverReport, RxState};
 use super::state::{LearntReceiver, LearntState};
 use super::survey::{enu_basis, Survey};
-use super::timing::{KnownTiming, TimingModel};
+use super::timing::{KnownTiming, TimingModel, Verdict};
 use crate::FastMap;
 use std::collections::HashMap;
 
@@ -19,7 +19,7 @@ use serde::Deserialize;
 
 use super::clock::PairParams;
 use super::group::Group;
-use super::solver::{solve, AltitudeConstraint, Measurement, Reject, SolverLimits, C_AIR};
+use super::solver::{solve, AltitudeConstraint, AtFix, Measurement, Reject, SolverLimits, C_AIR};
 use super::sync::{ClockSync, GroupVec, LocalCopy};
 use crate::feed::capture::{ClockKind, ReceiverDecl};
 use crate::geo::{ecef_distance, geodetic_to_ecef, FT_TO_M};
@@ -51,6 +51,20 @@ fn near(before: &super::solver::Fix, after: &super::solver::Fix) -> bool {
 
 /// Copies left out of a fix as outliers: measurement, site, sync variance (s^2).
 type Dropped = GroupVec<(Measurement, Site, f64)>;
+
+/// A fix's copies judged under their receivers' timing models: the
+/// problem linearised at the fix, and each copy's verdict (none for a
+/// merged site, whose time is no single receiver's).
+struct Judged {
+    at: AtFix,
+    verdicts: GroupVec<Option<Verdict>>,
+}
+
+impl Judged {
+    fn p_late(&self, k: usize) -> f64 {
+        self.verdicts[k].map_or(0.0, |v| v.p_late)
+    }
+}
 
 #[derive(Clone, Debug, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields, default)]
@@ -918,22 +932,30 @@ impl Mlat {
             }
             return None;
         }
-        let (fix, dropped) = match self.solve_robust(&mut ms, &mut sites, &mut sync_vars, alt, guess) {
+        let mut dropped = Dropped::new();
+        let solved = self.solve_robust(&mut ms, &mut sites, &mut sync_vars, &mut dropped, alt, guess);
+        let (fix, judged) = match solved {
             Ok(f) => f,
             Err(why) => {
                 self.reject(why);
                 return None;
             }
         };
-        let (fix, residuals) = self.hedge(&ms, &sites, alt, fix);
+        // Hedged against late copies, judged at the fix (as the robust
+        // solve already did when its last round found no outlier).
+        let judged = judged.or_else(|| (fix.dof > 0).then(|| self.judge(&ms, &sites, alt, &fix)).flatten());
+        let fix = match &judged {
+            Some(j) => super::solver::hedge(&fix, &j.at, |k| j.p_late(k)),
+            None => fix,
+        };
         let used: smallvec::SmallVec<[usize; 8]> = sites.iter().flatten().copied().collect();
         if !info.addr_known && fix.dof == 0 {
             // Nothing checks an unverified address: no fix from it.
             self.stats.unverified_address += 1;
             return None;
         }
-        if self.cfg.calibrate && fix.dof >= 1 {
-            self.learn(&residuals, &fix, &sites, &sync_vars, &dropped);
+        if let Some(j) = judged.as_ref().filter(|_| self.cfg.calibrate && fix.dof >= 1) {
+            self.learn(j, &fix, &sites, &sync_vars, &dropped);
         }
         let ac = self.aircraft.entry(info.addr).or_default();
         ac.last_tried = Some(now);
@@ -978,24 +1000,25 @@ impl Mlat {
     /// transmission. Which copy is the outlier is only told with two or more
     /// degrees of freedom. What remains is rejected only when it has no
     /// consistent subset (see [`Mlat::consistent`]); otherwise the solver's
-    /// covariance grows with the residuals. Returns the fix and the copies
-    /// left out (measurement, its site, its sync variance).
+    /// covariance grows with the residuals. Returns the fix, its copies
+    /// judged when the last round did so at the fix, and the copies left out
+    /// in `dropped` (measurement, its site, its sync variance).
     fn solve_robust(
         &mut self,
         ms: &mut GroupVec<Measurement>,
         sites: &mut GroupVec<Site>,
         sync_vars: &mut GroupVec<f64>,
+        dropped: &mut Dropped,
         alt: Option<AltitudeConstraint>,
         guess: Option<[f64; 3]>,
-    ) -> Result<(super::solver::Fix, Dropped), Reject> {
+    ) -> Result<(super::solver::Fix, Option<Judged>), Reject> {
         let open = SolverLimits { chi2_reject: false, ..self.limits };
-        let mut dropped = Dropped::new();
         let mut before: Option<super::solver::Fix> = None;
         loop {
             let fix = match solve(ms, alt, guess, &open) {
                 Ok(f) => f,
                 Err(why) => {
-                    return before.map_or(Err(why), |b| self.undrop(ms, sites, sync_vars, b, dropped))
+                    return before.map_or(Err(why), |b| self.undrop(ms, sites, sync_vars, dropped, b))
                 }
             };
             // Without a copy the equations may have another solution that
@@ -1004,21 +1027,28 @@ impl Mlat {
             // uncertainty of the one with the copy is not the same fix.
             if let Some(b) = before.take() {
                 if !near(&b, &fix) {
-                    return self.undrop(ms, sites, sync_vars, b, dropped);
+                    return self.undrop(ms, sites, sync_vars, dropped, b);
                 }
             }
             if fix.dof < 3 {
-                return self.consistent(fix, sites, dropped);
+                return self.consistent(fix, sites).map(|f| (f, None));
             }
-            let res = super::solver::residuals(ms, alt, &fix);
-            let worst = (res.iter().zip(ms.iter()).zip(sites.iter()).enumerate())
-                .filter_map(|(k, ((&(r, h), m), site))| {
-                    let v = self.rxs[site[0]].timing.judge(r, h, m.sigma_t.powi(2));
-                    v.outlier().then_some((k, v.score()))
-                })
-                .max_by(|a, b| a.1.total_cmp(&b.1));
+            let Some(at) = AtFix::new(ms, alt, &fix) else {
+                return self.consistent(fix, sites).map(|f| (f, None));
+            };
+            let mut worst: Option<(usize, f64)> = None;
+            let mut verdicts = GroupVec::new();
+            for (k, (m, site)) in ms.iter().zip(sites.iter()).enumerate() {
+                let (r, h) = at.residual(k);
+                let v = self.rxs[site[0]].timing.judge(r, h, m.sigma_t.powi(2));
+                if v.outlier() && worst.is_none_or(|(_, s)| v.score() > s) {
+                    worst = Some((k, v.score()));
+                }
+                verdicts.push((site.len() == 1).then_some(v));
+            }
             let Some((k, _)) = worst else {
-                return self.consistent(fix, sites, dropped);
+                let judged = Judged { at, verdicts };
+                return self.consistent(fix, sites).map(|f| (f, Some(judged)));
             };
             let (m, site, var) = (ms.remove(k), sites.remove(k), sync_vars.remove(k));
             self.stats.outliers_dropped += 1;
@@ -1027,21 +1057,25 @@ impl Mlat {
         }
     }
 
-    /// The fix hedged against the copies its receivers' models say may be
-    /// late (see [`super::solver::hedge`]); a merged site's time is no
-    /// single receiver's and is taken as it is. Also returns the residuals
-    /// and leverages at the fix (see [`super::solver::hedge`]).
-    fn hedge(
+    /// Each copy's odds of being late at the fix (see [`Judged`]).
+    fn judge(
         &self,
         ms: &[Measurement],
         sites: &[Site],
         alt: Option<AltitudeConstraint>,
-        fix: super::solver::Fix,
-    ) -> (super::solver::Fix, Vec<(f64, f64)>) {
-        super::solver::hedge(ms, alt, &fix, |k, r, h| match sites[k][..] {
-            [rx] => self.rxs[rx].timing.judge(r, h, ms[k].sigma_t.powi(2)).p_late,
-            _ => 0.0,
-        })
+        fix: &super::solver::Fix,
+    ) -> Option<Judged> {
+        let at = AtFix::new(ms, alt, fix)?;
+        let verdicts = (0..ms.len())
+            .map(|k| match sites[k][..] {
+                [rx] => {
+                    let (r, h) = at.residual(k);
+                    Some(self.rxs[rx].timing.judge(r, h, ms[k].sigma_t.powi(2)))
+                }
+                _ => None,
+            })
+            .collect();
+        Some(Judged { at, verdicts })
     }
 
     /// The last copy left out is put back: the fix with it stands.
@@ -1050,16 +1084,16 @@ impl Mlat {
         ms: &mut GroupVec<Measurement>,
         sites: &mut GroupVec<Site>,
         sync_vars: &mut GroupVec<f64>,
+        dropped: &mut Dropped,
         fix: super::solver::Fix,
-        mut dropped: Dropped,
-    ) -> Result<(super::solver::Fix, Dropped), Reject> {
+    ) -> Result<(super::solver::Fix, Option<Judged>), Reject> {
         if let Some((m, site, var)) = dropped.pop() {
             self.stats.outliers_dropped -= 1;
             ms.push(m);
             sites.push(site);
             sync_vars.push(var);
         }
-        self.consistent(fix, sites, dropped)
+        self.consistent(fix, sites).map(|f| (f, None))
     }
 
     /// A fix whose residuals, once the outliers are out, are beyond what
@@ -1068,19 +1102,21 @@ impl Mlat {
     /// variance) has no consistent subset. Within it, the solver's
     /// covariance grows with the residuals, and the receivers' sigmas with
     /// what they learn from them.
-    fn consistent(
-        &self,
-        fix: super::solver::Fix,
-        sites: &[Site],
-        dropped: Dropped,
-    ) -> Result<(super::solver::Fix, Dropped), Reject> {
+    fn consistent(&self, fix: super::solver::Fix, sites: &[Site]) -> Result<super::solver::Fix, Reject> {
+        if fix.dof == 0 {
+            return Ok(fix);
+        }
+        // The doubt is at least one: below the plain quantile, no need of it.
+        let limit = super::solver::chi2_quantile(fix.dof, self.limits.chi2_quantile);
+        if fix.chi2 <= limit {
+            return Ok(fix);
+        }
         let doubt =
             (sites.iter().flatten()).map(|&rx| self.rxs[rx].timing.variance_doubt()).fold(1.0, f64::max);
-        let limit = super::solver::chi2_quantile(fix.dof, self.limits.chi2_quantile) * doubt;
-        if fix.dof > 0 && fix.chi2 > limit {
+        if fix.chi2 > limit * doubt {
             return Err(Reject::Residual);
         }
-        Ok((fix, dropped))
+        Ok(fix)
     }
 
     /// Self-calibration: each copy's residual teaches its receiver's timing
@@ -1091,20 +1127,30 @@ impl Mlat {
     /// relative offsets are learnt, which is all the solver needs.
     fn learn(
         &mut self,
-        res: &[(f64, f64)],
+        judged: &Judged,
         fix: &super::solver::Fix,
         sites: &[Site],
         sync_vars: &[f64],
         dropped: &Dropped,
     ) {
         let (mut moved, mut sum): (GroupVec<usize>, f64) = (GroupVec::new(), 0.0);
-        for ((site, &(r, h)), &var) in sites.iter().zip(res).zip(sync_vars) {
-            // A merged site's residual is no single receiver's.
-            if h >= 0.95 || site.len() > 1 || self.rxs[site[0]].timing_known {
+        for (k, (site, &var)) in sites.iter().zip(sync_vars).enumerate() {
+            let (r, h) = judged.at.residual(k);
+            // A merged site's residual is no single receiver's (nor verdict).
+            let Some(v) = judged.verdicts[k] else { continue };
+            let rx = site[0];
+            let rx_state = &mut self.rxs[rx];
+            if h >= 0.95 || rx_state.timing_known {
                 continue;
             }
-            sum += self.rxs[site[0]].timing.learn(r, h, var);
-            moved.push(site[0]);
+            // The verdict the fix was hedged with, unless the fix weighted
+            // the receiver at its floor rather than its learnt sigma.
+            sum += if rx_state.sigma() == rx_state.timing.sigma() {
+                rx_state.timing.learn_judged(r, h, v)
+            } else {
+                rx_state.timing.learn(r, h, var)
+            };
+            moved.push(rx);
         }
         for (m, site, var) in dropped {
             if site.len() > 1 || self.rxs[site[0]].timing_known {
@@ -1141,6 +1187,16 @@ impl Mlat {
         let gps: GroupVec<usize> =
             (0..copies.len()).filter(|&k| self.rxs[copies[k].rx].clock == ClockKind::Gps).collect();
         if gps.len() < 2 {
+            return;
+        }
+        // Nearly always they agree, and no median is needed to say so.
+        let (lo, hi) = (gps.iter()).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &k| {
+            (lo.min(copies[k].t), hi.max(copies[k].t))
+        });
+        if hi - lo <= GPS_AGREE_S {
+            for &k in &gps {
+                self.note_jump(copies[k].rx, false);
+            }
             return;
         }
         let mut times: GroupVec<f64> = gps.iter().map(|&k| copies[k].t).collect();

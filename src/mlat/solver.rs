@@ -412,15 +412,19 @@ fn cov_en_of(c: &Matrix3<f64>, [sp, cp, sl, cl]: [f64; 4]) -> [[f64; 2]; 2] {
 
 /// The least-squares problem linearised at a fix: each measurement's
 /// residual (m), Jacobian row and weight, the normal matrix's inverse and
-/// the chi-square. What residuals, leverages and the hedge are read from.
-struct AtFix {
-    rows: Vec<(f64, Vector4<f64>, f64)>,
+/// the chi-square. What residuals, leverages and the hedge are read from,
+/// built once per fix: the engine judges the copies from it and hedges
+/// with the same.
+pub struct AtFix {
+    /// Per measurement: residual (m), Jacobian row, weight, leverage.
+    rows: Vec<(f64, Vector4<f64>, f64, f64)>,
     inv: Matrix4<f64>,
     chi2: f64,
 }
 
 impl AtFix {
-    fn new(ms: &[Measurement], alt: Option<AltitudeConstraint>, fix: &Fix) -> Option<AtFix> {
+    /// `None` when the normal matrix has no inverse.
+    pub fn new(ms: &[Measurement], alt: Option<AltitudeConstraint>, fix: &Fix) -> Option<AtFix> {
         let t0 = ms.iter().map(|m| m.t).fold(f64::INFINITY, f64::min);
         let x = Vector4::new(fix.ecef[0], fix.ecef[1], fix.ecef[2], C_AIR * (fix.t_emit - t0));
         let nrm = normal(&x, ms, t0, alt);
@@ -432,24 +436,25 @@ impl AtFix {
                 let r = d.norm().max(1.0);
                 let res = C_AIR * (m.t - t0) - r - x[3];
                 let j = Vector4::new(d[0] / r, d[1] / r, d[2] / r, 1.0);
-                (res, j, 1.0 / (C_AIR * m.sigma_t).powi(2))
+                let w = 1.0 / (C_AIR * m.sigma_t).powi(2);
+                (res, j, w, w * (j.transpose() * inv * j)[0])
             })
             .collect();
         Some(AtFix { rows, inv, chi2: nrm.chi2 })
     }
 
     /// Measurement `k`'s residual (s) and leverage.
-    fn residual(&self, k: usize) -> (f64, f64) {
-        let (res, j, w) = self.rows[k];
-        (res / C_AIR, w * (j.transpose() * self.inv * j)[0])
+    pub fn residual(&self, k: usize) -> (f64, f64) {
+        let (res, _, _, leverage) = self.rows[k];
+        (res / C_AIR, leverage)
     }
-}
 
-/// Per-measurement residuals (s, measured minus modelled) and leverages at a
-/// solution: what self-calibration learns receiver biases and noise from.
-/// A residual shrinks by `1 - leverage` because the fit absorbs part of it.
-pub fn residuals(ms: &[Measurement], alt: Option<AltitudeConstraint>, fix: &Fix) -> Vec<(f64, f64)> {
-    AtFix::new(ms, alt, fix).map_or_else(Vec::new, |a| (0..ms.len()).map(|k| a.residual(k)).collect())
+    /// Every measurement's residual (s, measured minus modelled) and
+    /// leverage: what self-calibration learns receivers' timing from. A
+    /// residual shrinks by `1 - leverage` because the fit absorbs part of it.
+    pub fn residuals(&self) -> Vec<(f64, f64)> {
+        (0..self.rows.len()).map(|k| self.residual(k)).collect()
+    }
 }
 
 /// A fix hedged against copies that may be late without the others being
@@ -458,34 +463,21 @@ pub fn residuals(ms: &[Measurement], alt: Option<AltitudeConstraint>, fix: &Fix)
 /// off by as much while its covariance, set by that receiver's sigma, says
 /// metres. Under the mixture "copy good" / "copy late, so worthless" the
 /// fix is the leave-one-out fix with probability `p`, the posterior that
-/// the copy is late (`p_late` of the copy's index, residual (s) and
-/// leverage): its covariance grows
+/// the copy is late (`p_late` of a measurement's index, from its residual
+/// and leverage at the fix as `at` gives them): its covariance grows
 /// by `p` times what leaving the copy out adds plus the spread between the
 /// two fixes, `p (1 - p) d d^T` (each copy taken on its own, linearised
 /// at the fix: Sherman-Morrison on the normal matrix). The position stays:
 /// moved by `p d` towards the fixes without the copies (the mixture's
 /// mean), network-rough's fixes came out worse, and their covariance too
 /// large. A copy the fix cannot stand without (leverage near one) is
-/// taken at 0.999. Also returns each measurement's residual (s) and
-/// leverage at the fix, as [`residuals`] gives them (none for a fix
-/// without redundancy).
-pub fn hedge(
-    ms: &[Measurement],
-    alt: Option<AltitudeConstraint>,
-    fix: &Fix,
-    p_late: impl Fn(usize, f64, f64) -> f64,
-) -> (Fix, Vec<(f64, f64)>) {
-    let at = match fix.dof {
-        0 => None,
-        _ => AtFix::new(ms, alt, fix),
-    };
-    let Some(at) = at else { return (*fix, Vec::new()) };
+/// taken at 0.999.
+pub fn hedge(fix: &Fix, at: &AtFix, p_late: impl Fn(usize) -> f64) -> Fix {
     // The fix's covariance as the solver scaled it.
     let scale = if at.chi2 > chi2_quantile(fix.dof, 0.99) { at.chi2 / fix.dof as f64 } else { 1.0 };
     let mut cov = Matrix3::from_fn(|r, c| fix.cov_ecef[r][c]);
-    let residuals: Vec<(f64, f64)> = (0..ms.len()).map(|k| at.residual(k)).collect();
-    for (k, (&(r, leverage), &(res, j, w))) in residuals.iter().zip(&at.rows).enumerate() {
-        let pl = p_late(k, r, leverage);
+    for (k, &(res, j, w, leverage)) in at.rows.iter().enumerate() {
+        let pl = p_late(k);
         if pl <= 0.0 {
             continue;
         }
@@ -501,7 +493,7 @@ pub fn hedge(
     let (_, [sp, cp, sl, cl]) = ecef_height_fast(fix.ecef);
     out.cov_ecef = std::array::from_fn(|r| std::array::from_fn(|c| cov[(r, c)]));
     out.cov_en = cov_en_of(&cov, [sp, cp, sl, cl]);
-    (out, residuals)
+    out
 }
 
 /// Levenberg-Marquardt from `x`.
@@ -694,9 +686,18 @@ mod tests {
             let alt = Some(AltitudeConstraint { h_m: 3000.0 + alt_noise.sample(&mut rng), sigma_m: 10.0 });
             let limits = SolverLimits { chi2_reject: false, ..SolverLimits::default() };
             let Ok(f) = solve(&ms, alt, None, &limits) else { continue };
-            let late = |k, r, h| if k == 0 { model.judge(r, h, 20e-9f64.powi(2)).p_late } else { 0.0 };
-            let (g, res) = hedge(&ms, alt, &f, late);
-            assert_eq!(res, residuals(&ms, alt, &f));
+            let at = AtFix::new(&ms, alt, &f).unwrap();
+            let late: Vec<f64> = (0..ms.len())
+                .map(|k| {
+                    let (r, h) = at.residual(k);
+                    if k == 0 {
+                        model.judge(r, h, 20e-9f64.powi(2)).p_late
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
+            let g = hedge(&f, &at, |k| late[k]);
             assert_eq!(g.ecef, f.ecef, "the hedge moves no fix");
             plain += nees(&f);
             hedged += nees(&g);

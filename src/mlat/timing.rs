@@ -171,10 +171,18 @@ impl TimingModel {
     pub fn verdict(&self, d: f64, var_s2: f64) -> Verdict {
         let s = var_s2.max(1e-24).sqrt();
         let z = d / s;
-        let ln_core =
-            (1.0 - self.late_rate).ln() - 0.5 * z * z - s.ln() - 0.5 * (2.0 * std::f64::consts::PI).ln();
-        let ln_late = self.late_rate.ln() + ln_exgauss(d, s, self.late_mean_s);
-        let p_late = 1.0 / (1.0 + (ln_core - ln_late).exp());
+        // The log-odds of late against core: the core a Gaussian, the late
+        // copies a Gaussian plus an exponential delay of rate l, whose
+        // density is (l/2) exp(l/2 (l s^2 - 2d)) erfc(x). Every copy of
+        // every fix is judged, several times, so the logarithms are
+        // gathered into one.
+        let l = 1.0 / self.late_mean_s;
+        let x = (l * s * s - d) / (s * std::f64::consts::SQRT_2);
+        let (t, poly) = erfc_parts(x.abs());
+        let (erfc_factor, erfc_exp) = if x >= 0.0 { (t, poly) } else { (2.0 - t * poly.exp(), 0.0) };
+        let odds = self.late_rate / (1.0 - self.late_rate) * 0.5 * l * s * erfc_factor;
+        let ln_odds = odds.ln() + erfc_exp + LN_SQRT_2PI + 0.5 * z * z + 0.5 * l * (l * s * s - 2.0 * d);
+        let p_late = 1.0 / (1.0 + (-ln_odds).exp());
         Verdict { p_late, z }
     }
 
@@ -199,6 +207,13 @@ impl TimingModel {
     /// Returns the step its offset took (see [`TimingModel::shift`]).
     pub fn learn(&mut self, r: f64, h: f64, sync_var_s2: f64) -> f64 {
         let v = self.judge(r, h, self.var_s2 + sync_var_s2);
+        self.learn_judged(r, h, v)
+    }
+
+    /// [`TimingModel::learn`] with the residual already judged (`v`, as
+    /// [`TimingModel::judge`] gave it with the model's variance and the
+    /// sync's).
+    pub fn learn_judged(&mut self, r: f64, h: f64, v: Verdict) -> f64 {
         let h = h.clamp(0.0, 0.95);
         let d = r / (1.0 - h);
         if v.outlier() && v.p_late < 0.5 {
@@ -239,19 +254,13 @@ impl TimingModel {
     }
 }
 
-/// Log density at `d` of a Gaussian (sigma `s`) plus an exponential delay
-/// of mean `mean`: ln(l/2) + l/2 (l s^2 - 2 d) + ln erfc((l s^2 - d) / (s sqrt 2)).
-fn ln_exgauss(d: f64, s: f64, mean: f64) -> f64 {
-    let l = 1.0 / mean;
-    (0.5 * l).ln()
-        + 0.5 * l * (l * s * s - 2.0 * d)
-        + ln_erfc((l * s * s - d) / (s * std::f64::consts::SQRT_2))
-}
+/// ln sqrt(2 pi).
+const LN_SQRT_2PI: f64 = 0.918_938_533_204_672_8;
 
-/// ln erfc(x), without overflow or underflow for large |x| (Chebyshev
-/// fit, fractional error below 1.2e-7 everywhere).
-fn ln_erfc(x: f64) -> f64 {
-    let z = x.abs();
+/// erfc(z) for z >= 0 as `t * exp(poly)`, apart so that its logarithm
+/// neither underflows for large z nor costs a logarithm of its own
+/// (Chebyshev fit, fractional error below 1.2e-7 everywhere).
+fn erfc_parts(z: f64) -> (f64, f64) {
     let t = 1.0 / (1.0 + 0.5 * z);
     let poly = -z * z - 1.265_512_23
         + t * (1.000_023_68
@@ -261,12 +270,7 @@ fn ln_erfc(x: f64) -> f64 {
                         + t * (0.278_868_07
                             + t * (-1.135_203_98
                                 + t * (1.488_515_87 + t * (-0.822_152_23 + t * 0.170_872_77))))))));
-    let ln_tail = t.ln() + poly;
-    if x >= 0.0 {
-        ln_tail
-    } else {
-        (2.0 - ln_tail.exp()).ln()
-    }
+    (t, poly)
 }
 
 #[cfg(test)]
@@ -276,14 +280,48 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
     use rand_distr::{Distribution, Exp, Normal};
 
-    #[test]
-    fn ln_erfc_matches_known_values() {
-        // erfc(0) = 1, erfc(1) = 0.157299207, erfc(-1) = 1.842700793, erfc(5) = 1.5375e-12.
-        for (x, v) in [(0.0, 1.0), (1.0, 0.157_299_207), (-1.0, 1.842_700_793), (5.0, 1.537_459_8e-12)] {
-            let got = ln_erfc(x);
-            assert!((got - f64::ln(v)).abs() < 1e-5, "x {x}: {got} against {}", f64::ln(v));
+    /// erfc from its parts, for either sign.
+    fn erfc(x: f64) -> f64 {
+        let (t, poly) = erfc_parts(x.abs());
+        let e = t * poly.exp();
+        if x >= 0.0 {
+            e
+        } else {
+            2.0 - e
         }
-        assert!(ln_erfc(40.0).is_finite() && (ln_erfc(-40.0) - f64::ln(2.0)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn erfc_matches_known_values() {
+        for (x, v) in [(0.0, 1.0), (1.0, 0.157_299_207), (-1.0, 1.842_700_793), (5.0, 1.537_459_8e-12)] {
+            assert!((erfc(x) / v - 1.0).abs() < 1e-6, "x {x}: {} against {v}", erfc(x));
+        }
+        // Far out, its logarithm still holds where erfc itself underflows.
+        let (t, poly) = erfc_parts(40.0);
+        assert!((t.ln() + poly - (-1600.0 - (40.0 * std::f64::consts::PI.sqrt()).ln())).abs() < 1e-3);
+    }
+
+    #[test]
+    fn the_verdict_is_the_posterior_of_the_two_densities() {
+        let m = TimingModel { late_rate: 0.07, late_mean_s: 250e-9, ..TimingModel::prior(40e-9) };
+        let var = (45e-9f64).powi(2);
+        let s = var.sqrt();
+        for d in [-200e-9, -60e-9, 0.0, 30e-9, 90e-9, 150e-9, 400e-9, 1.5e-6] {
+            let core = (1.0 - m.late_rate) * (-0.5 * (d / s).powi(2)).exp()
+                / (s * (2.0 * std::f64::consts::PI).sqrt());
+            let l = 1.0 / m.late_mean_s;
+            let late = m.late_rate
+                * 0.5
+                * l
+                * (0.5 * l * (l * s * s - 2.0 * d)).exp()
+                * erfc((l * s * s - d) / (s * std::f64::consts::SQRT_2));
+            let want = late / (late + core);
+            let got = m.verdict(d, var).p_late;
+            assert!((got - want).abs() < 1e-6, "d {d}: {got} against {want}");
+        }
+        // Never late at all: never judged late.
+        let clean = TimingModel { late_rate: 0.0, ..m };
+        assert_eq!(clean.verdict(400e-9, var).p_late, 0.0);
     }
 
     /// Residuals of a receiver with the given core, offset and late tail.
