@@ -68,8 +68,9 @@ impl Figures {
 
     /// What holds on any of the sets, in any order: fixes for 97% of
     /// transmissions, 90% within 1.96 sigma across track (the issue's
-    /// targets), and a median below the peer's (the issue's 40 m is not
-    /// met: 40.8 m on all four sets, 39.7 m before issue 35).
+    /// targets), and a median below the peer's. (The issue's 40 m median is
+    /// asked of all four sets; on half of them, with half the traffic to
+    /// learn the barometric difference from, it is a little over.)
     fn hold(&self, peer: &Figures) -> bool {
         self.rate >= 0.97 && self.cross >= 0.90 && self.median < peer.median
     }
@@ -293,10 +294,11 @@ fn locards_fixes_are_accurate_their_covariance_honest_and_nothing_is_fitted_to_t
         "before issue 35 (recorded)", 97.7, 39.7, 185.0, "-", 88.8
     );
     eprintln!("{table}");
-    assert!(ours.hold(&peer), "{table}");
+    assert!(ours.hold(&peer) && ours.median <= 40.0, "{table}");
     for (name, f) in &variants {
         assert!(f.hold(&peer), "{name}: {table}");
     }
+    assert!(variants[0].1.median <= 40.0, "{table}");
     // The fixes lead the stale reference along track, by tens of metres on average.
     assert!(ours.along > 20.0, "{table}");
 }

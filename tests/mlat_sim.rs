@@ -537,3 +537,43 @@ fn hostile_receivers_are_found_and_do_not_degrade_the_others() {
     eprintln!("fix median {hostile_m:.1} m with the hostile receivers, {clean_m:.1} m without them");
     assert!(hostile_m <= 1.05 * clean_m, "{hostile_m} against {clean_m}");
 }
+
+/// Mode S-only traffic (no ADS-B aircraft to report the difference between
+/// barometric altitude and height above the ellipsoid) whose barometric
+/// altitudes stand 100 m above their heights: the fixes' geometry learns
+/// the difference, so that the fixes' heights come out right and their
+/// horizontal error is as in a world with no difference at all.
+#[test]
+fn the_barometric_difference_is_learnt_from_the_fixes_where_no_aircraft_reports_it() {
+    let world = |baro_offset_m: f64| {
+        let mut s = tma_busy_cut(300.0, 30, 30, 0);
+        s.baro_offset_m = baro_offset_m;
+        for r in &mut s.receiver {
+            r.clock = ClockKind::Gps;
+            r.drift_ppm = 0.0;
+            r.drift_walk_ppm = 0.0;
+            r.position_error_m = [0.0; 3];
+        }
+        let (capture, truth_bytes) = sim(&s);
+        let truth = Truth::read(&truth_bytes[..]).unwrap();
+        let (_, events, _) = run_core(&capture, &CoreConfig::default());
+        // Over the second half, once learnt.
+        let late: Vec<Event> = (events.into_iter())
+            .filter(|e| matches!(e, Event::Mlat(f) if f.altitude_used && f.t >= s.start_unix + 150.0))
+            .collect();
+        let dz: Vec<f64> = (late.iter())
+            .filter_map(|e| if let Event::Mlat(f) = e { Some(f) } else { None })
+            .filter_map(|f| Some(f.alt_m - truth.position(&format!("{:06X}", f.addr), f.t)?.2))
+            .collect();
+        (dz.iter().sum::<f64>() / dz.len() as f64, fix_median_error(&late, &truth), dz.len())
+    };
+    let (dz_none, median_none, _) = world(0.0);
+    let (dz, median, n) = world(-100.0);
+    eprintln!(
+        "{n} fixes: height error {dz:+.1} m (world without a difference {dz_none:+.1} m), \
+         median {median:.1} m ({median_none:.1} m)"
+    );
+    assert!(n > 1000, "{n} fixes");
+    assert!((dz - dz_none).abs() < 30.0, "height error {dz:+.1} m against {dz_none:+.1} m");
+    assert!(median < 1.15 * median_none, "median {median:.1} m against {median_none:.1} m");
+}

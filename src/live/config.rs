@@ -6,8 +6,8 @@ use std::net::{IpAddr, SocketAddr};
 
 use serde::{Deserialize, Serialize};
 
-use crate::feed::capture::{ClockKind, ReceiverDecl};
 use crate::core::front::KnownReceiver;
+use crate::feed::capture::{ClockKind, ReceiverDecl};
 use crate::mlat::timing::KnownTiming;
 
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]

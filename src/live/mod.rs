@@ -34,8 +34,8 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 
 use crate::config::Config;
-use crate::core::{Back, Cmd, Core, Event, Front};
 use crate::core::front::KnownReceiver;
+use crate::core::{Back, Cmd, Core, Event, Front};
 use crate::feed::capture::ReceiverDecl;
 use crate::feed::RawFrame;
 use config::InputConfig;

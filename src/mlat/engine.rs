@@ -24,7 +24,7 @@ use super::sync::{ClockSync, GroupVec, LocalCopy};
 use crate::feed::capture::{ClockKind, ReceiverDecl};
 use crate::geo::{ecef_distance, geodetic_to_ecef, FT_TO_M};
 
-use super::baro::BaroCorrection;
+use super::baro::{BaroCorrection, GeometricBaros};
 
 /// Height above the ellipsoid (m) of a barometric altitude, and its 1-sigma
 /// (m): corrected by the aircraft's own GNSS-baro difference when it reports
@@ -237,6 +237,11 @@ const JUMPS_EXCLUDE: f64 = 0.2;
 /// A receiver clock that disagrees with the server's clock by more than this
 /// (s) between two frames has jumped. Network delays vary by far less.
 const CLOCK_JUMP_S: f64 = 5.0;
+/// One aircraft's fixes give the barometric difference a look this often
+/// at most (s): its successive fixes share its geometry and its errors, so
+/// that looks taken at every fix would count one aircraft hundreds of times
+/// and make the difference look surer than it is.
+const BARO_LOOK_EVERY_S: f64 = 10.0;
 /// How long an aircraft's MLAT state outlives its last use, and a banned
 /// sync source's (a spoofer that pauses does not become honest).
 pub const AIRCRAFT_TTL_S: f64 = 600.0;
@@ -279,6 +284,8 @@ struct AcState {
     last_tried: Option<f64>,
     /// Last time an ADS-B position of this aircraft was seen.
     last_adsb: Option<f64>,
+    /// When its fixes last gave the barometric difference a look.
+    last_baro_look: Option<f64>,
     /// Recent mean normalised innovation of the sync measurements its ADS-B
     /// positions made: an aircraft whose positions disagree with the timing
     /// (bad GPS, spoofing) stops being a sync source.
@@ -295,6 +302,9 @@ pub struct Mlat {
     aircraft: FastMap<u32, AcState>,
     /// Nanoseconds since the Unix epoch of the GPS time base's zero.
     gps_epoch_ns: Option<i64>,
+    /// The barometric altitudes' difference from the ellipsoid height as
+    /// the fixes' geometry sees it, for aircraft without a better one.
+    geometric_baro: GeometricBaros,
     pub stats: MlatStats,
     /// The last group too small for a fix, for the tracker ([`Mlat::take_tdoa`]).
     tdoa: Option<TdoaGroup>,
@@ -360,6 +370,7 @@ impl Mlat {
             sync: ClockSync::new(pair),
             aircraft: FastMap::default(),
             gps_epoch_ns: None,
+            geometric_baro: GeometricBaros::default(),
             stats: MlatStats::default(),
             tdoa: None,
         }
@@ -526,6 +537,7 @@ impl Mlat {
     /// hold every address ever heard. Nothing older than a few minutes is
     /// used anyway (altitudes, fixes and attempts are read within seconds).
     pub fn prune(&mut self, now: f64) {
+        self.geometric_baro.prune(now);
         self.aircraft.retain(|_, a| {
             let newest = [a.alt_ft.map(|x| x.1), a.last_fix.map(|x| x.1), a.last_tried, a.last_adsb]
                 .into_iter()
@@ -885,21 +897,28 @@ impl Mlat {
                 }
             }
         }
-        let alt = ac.alt_ft.and_then(|(ft, t, diff)| {
+        // The barometric altitude's own height and variance (25 ft steps,
+        // climb since), apart from its correction to the ellipsoid, when
+        // recent enough to constrain the fix.
+        let baro = ac.alt_ft.and_then(|(ft, t, diff)| {
             let age = (now - t).abs();
-            (age <= self.cfg.max_alt_age_s).then(|| {
-                // 25 ft steps, the baro-to-geometric correction, and climb
-                // since. The correction is the aircraft's own when its ADS-B
-                // reports one (GNSS minus baro, in 25 ft steps): taken as zero
-                // instead, an error the same for every fix of the flight
-                // (45 m on tma-busy) moved its fixes off the same way for
-                // minutes, which a track fed by them could not average away.
-                let quant = 25.0 * FT_TO_M / 12f64.sqrt();
-                let (h_m, correction) = baro_height(ft, diff, self.cfg.baro_sigma_m);
-                let sigma =
-                    (quant.powi(2) + correction.powi(2) + (age * self.cfg.alt_growth_mps).powi(2)).sqrt();
-                AltitudeConstraint { h_m, sigma_m: sigma }
-            })
+            let quant = 25.0 * FT_TO_M / 12f64.sqrt();
+            let var = quant.powi(2) + (age * self.cfg.alt_growth_mps).powi(2);
+            (age <= self.cfg.max_alt_age_s).then_some((ft, var, diff))
+        });
+        let alt = baro.map(|(ft, var, diff)| {
+            // The correction is the aircraft's own when its ADS-B reports
+            // one (GNSS minus baro, in 25 ft steps), else the region's from
+            // the ADS-B traffic, else from the fixes' geometry: taken as zero
+            // instead, an error the same for every fix of the flight (45 m
+            // on tma-busy, 90 m on LocaRDS) moved its fixes off the same way
+            // for minutes, which a track fed by them could not average away.
+            let diff = diff.or_else(|| {
+                let (lat, lon, _) = crate::geo::ecef_to_geodetic(ac.last_fix?.0);
+                self.geometric_baro.correction(lat, lon, ft, self.cfg.baro_sigma_m)
+            });
+            let (h_m, correction) = baro_height(ft, diff, self.cfg.baro_sigma_m);
+            AltitudeConstraint { h_m, sigma_m: (var + correction.powi(2)).sqrt() }
         });
         let guess = ac.last_fix.filter(|(_, t)| (now - t).abs() < 30.0).map(|(p, _)| p);
         let too_few = ms.len() < 3 || (ms.len() < 4 && alt.is_none());
@@ -944,6 +963,16 @@ impl Mlat {
         // Hedged against late copies, judged at the fix (as the robust
         // solve already did when its last round found no outlier).
         let judged = judged.or_else(|| (fix.dof > 0).then(|| self.judge(&ms, &sites, alt, &fix)).flatten());
+        // What the fix's geometry says of the barometric altitude's
+        // difference from the ellipsoid height (see [`GeometricBaro`]).
+        let ac = self.aircraft.entry(info.addr).or_default();
+        let look_due = ac.last_baro_look.is_none_or(|t| (now - t).abs() >= BARO_LOOK_EVERY_S);
+        if let (Some(a), Some((ft, var, _)), Some(j), true) = (alt, baro, &judged, look_due) {
+            if let Some((geom_m, geom_var)) = j.at.height_apart(&fix, a) {
+                ac.last_baro_look = Some(now);
+                self.geometric_baro.observe(fix.lat, fix.lon, (geom_m, geom_var), ft, var, now);
+            }
+        }
         let fix = match &judged {
             Some(j) => super::solver::hedge(&fix, &j.at, |k| j.p_late(k)),
             None => fix,

@@ -449,6 +449,24 @@ impl AtFix {
         (res / C_AIR, leverage)
     }
 
+    /// The fix's height (m) as its time differences alone put it, apart
+    /// from its altitude constraint `alt`, and that height's variance:
+    /// leaving the constraint out (Sherman-Morrison on the normal matrix,
+    /// before any scaling by the residuals) moves the height by h / (1 - h)
+    /// of the constraint's residual and divides the variance by 1 - h,
+    /// where h is the constraint's leverage. `None` where the constraint
+    /// carries the height all but alone.
+    pub fn height_apart(&self, fix: &Fix, alt: AltitudeConstraint) -> Option<(f64, f64)> {
+        let (lat, lon) = (fix.lat.to_radians(), fix.lon.to_radians());
+        let up = Vector4::new(lat.cos() * lon.cos(), lat.cos() * lon.sin(), lat.sin(), 0.0);
+        let v = (up.transpose() * self.inv * up)[0];
+        let h = v / alt.sigma_m.powi(2);
+        if !(v > 0.0 && h < 0.999) {
+            return None;
+        }
+        Some((fix.h_m - h / (1.0 - h) * (alt.h_m - fix.h_m), v / (1.0 - h)))
+    }
+
     /// Every measurement's residual (s, measured minus modelled) and
     /// leverage: what self-calibration learns receivers' timing from. A
     /// residual shrinks by `1 - leverage` because the fit absorbs part of it.
