@@ -32,6 +32,11 @@ pub(super) fn front_metrics(
     for (id, n) in front.late_copies() {
         metrics::counter!("fuse1090_receiver_late_copies_total", "receiver" => id.to_string()).absolute(n);
     }
+    // Copies of a transmission left out of its fix: late ones (multipath)
+    // and GPS times off by seconds from the others'.
+    let m = &front.mlat().stats;
+    metrics::counter!("fuse1090_mlat_outliers_dropped_total").absolute(m.outliers_dropped);
+    metrics::counter!("fuse1090_mlat_gps_time_jumps_total").absolute(m.time_jumps);
     for (rx, (id, h)) in front.mlat_health().enumerate() {
         // MLAT exclusion is a state, not a sentence: an excluded receiver
         // is still synchronised and comes back (gauge 1 while it is out).
