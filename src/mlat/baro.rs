@@ -56,17 +56,81 @@ impl BaroCorrection {
     }
 }
 
-/// Decayed sums of a weighted straight-line fit of the difference (ft)
-/// against the altitude (kft).
+/// Exponentially faded sums of a weighted straight-line fit of `y`
+/// against `x`, the altitude (kft): the fit of [`RegionalBaro`] and of
+/// [`GeometricBaro`].
+#[derive(Clone, Debug, Default)]
+struct FadedLine {
+    /// When last faded.
+    t: f64,
+    /// Decayed count, and sums of w, w x, w x^2, w y, w x y, w y^2 and w^2.
+    n: f64,
+    w: f64,
+    wx: f64,
+    wxx: f64,
+    wy: f64,
+    wxy: f64,
+    wyy: f64,
+    ww: f64,
+}
+
+/// A [`FadedLine`]'s centred moments, and its slope (zero when the
+/// altitudes spread less than [`MIN_SPREAD_KFT`]).
+struct Moments {
+    mx: f64,
+    my: f64,
+    sxx: f64,
+    sxy: f64,
+    syy: f64,
+    slope: f64,
+    sloped: bool,
+}
+
+impl FadedLine {
+    /// A point of weight `w` at `t`. Faded once a second at most: an
+    /// exponential per report is dearer than the rest of the update.
+    fn add(&mut self, x: f64, y: f64, w: f64, t: f64) {
+        if t > self.t + 1.0 || self.n == 0.0 {
+            let k = if self.n == 0.0 { 1.0 } else { (-(t - self.t) / TIME_CONSTANT_S).exp() };
+            for s in [
+                &mut self.n,
+                &mut self.w,
+                &mut self.wx,
+                &mut self.wxx,
+                &mut self.wy,
+                &mut self.wxy,
+                &mut self.wyy,
+                &mut self.ww,
+            ] {
+                *s *= k;
+            }
+            self.t = t;
+        }
+        self.n += 1.0;
+        self.w += w;
+        self.wx += w * x;
+        self.wxx += w * x * x;
+        self.wy += w * y;
+        self.wxy += w * x * y;
+        self.wyy += w * y * y;
+        self.ww += w * w;
+    }
+
+    fn moments(&self) -> Moments {
+        let (mx, my) = (self.wx / self.w, self.wy / self.w);
+        let sxx = (self.wxx - self.w * mx * mx).max(0.0);
+        let sxy = self.wxy - self.w * mx * my;
+        let syy = (self.wyy - self.w * my * my).max(0.0);
+        let sloped = sxx / self.w >= MIN_SPREAD_KFT * MIN_SPREAD_KFT;
+        let slope = if sloped { sxy / sxx } else { 0.0 };
+        Moments { mx, my, sxx, sxy, syy, slope, sloped }
+    }
+}
+
+/// The difference (ft) against the altitude (kft), each report of weight one.
 #[derive(Clone, Debug, Default)]
 pub struct RegionalBaro {
-    t: f64,
-    w: f64,
-    x: f64,
-    y: f64,
-    xx: f64,
-    xy: f64,
-    yy: f64,
+    fit: FadedLine,
     /// Reports left out as outliers.
     pub outliers: u64,
     outliers_in_a_row: u32,
@@ -89,21 +153,7 @@ impl RegionalBaro {
             }
         }
         self.outliers_in_a_row = 0;
-        // Faded once a second at most: an exponential per report is dearer
-        // than the rest of the update.
-        if t > self.t + 1.0 || self.w == 0.0 {
-            let k = if self.w == 0.0 { 1.0 } else { (-(t - self.t) / TIME_CONSTANT_S).exp() };
-            for s in [&mut self.w, &mut self.x, &mut self.y, &mut self.xx, &mut self.xy, &mut self.yy] {
-                *s *= k;
-            }
-            self.t = t;
-        }
-        self.w += 1.0;
-        self.x += x;
-        self.y += y;
-        self.xx += x * x;
-        self.xy += x * y;
-        self.yy += y * y;
+        self.fit.add(x, y, 1.0, t);
     }
 
     /// An aircraft's own difference when it reports one, else the region's.
@@ -117,19 +167,16 @@ impl RegionalBaro {
     }
 
     fn at_kft(&self, x: f64) -> Option<BaroCorrection> {
-        if self.w < MIN_WEIGHT {
+        let w = self.fit.w;
+        if w < MIN_WEIGHT {
             return None;
         }
-        let (mx, my) = (self.x / self.w, self.y / self.w);
-        let sxx = (self.xx - self.w * mx * mx).max(0.0);
-        let sxy = self.xy - self.w * mx * my;
-        let syy = (self.yy - self.w * my * my).max(0.0);
-        let slope = if sxx / self.w >= MIN_SPREAD_KFT * MIN_SPREAD_KFT { sxy / sxx } else { 0.0 };
+        let Moments { mx, my, sxx, sxy, syy, slope, .. } = self.fit.moments();
         // Scatter about the line (ft^2), then the line's own variance where
         // it is read (the reports are not independent, so this is a floor).
-        let scatter = ((syy - slope * sxy) / self.w).max(0.0);
+        let scatter = ((syy - slope * sxy) / w).max(0.0);
         let dx = x - mx;
-        let line = scatter * (1.0 / self.w + if slope != 0.0 { dx * dx / sxx } else { 0.0 });
+        let line = scatter * (1.0 / w + if slope != 0.0 { dx * dx / sxx } else { 0.0 });
         let sigma_m = ((scatter + line).sqrt() * FT_TO_M).max(OWN_DIFF_SIGMA_M);
         Some(BaroCorrection { diff_ft: my + slope * dx, sigma_m })
     }
@@ -154,17 +201,8 @@ const MIN_LOOKS: f64 = 10.0;
 /// region's reports do.
 #[derive(Clone, Debug, Default)]
 pub struct GeometricBaro {
-    t: f64,
-    /// Decayed count, and sums of w, w x, w x^2, w d, w x d, w d^2 and
-    /// w^2 (x the altitude in kft, d the difference in m, w = 1/variance).
-    n: f64,
-    w: f64,
-    wx: f64,
-    wxx: f64,
-    wd: f64,
-    wxd: f64,
-    wdd: f64,
-    ww: f64,
+    /// The difference (m) against the altitude (kft), weighted by 1/variance.
+    fit: FadedLine,
 }
 
 impl GeometricBaro {
@@ -177,60 +215,32 @@ impl GeometricBaro {
         if !(var > 0.0 && var.is_finite() && d.is_finite()) {
             return;
         }
-        if t > self.t + 1.0 || self.n == 0.0 {
-            let k = if self.n == 0.0 { 1.0 } else { (-(t - self.t) / TIME_CONSTANT_S).exp() };
-            for s in [
-                &mut self.n,
-                &mut self.w,
-                &mut self.wx,
-                &mut self.wxx,
-                &mut self.wd,
-                &mut self.wxd,
-                &mut self.wdd,
-                &mut self.ww,
-            ] {
-                *s *= k;
-            }
-            self.t = t;
-        }
-        let w = 1.0 / var;
-        self.n += 1.0;
-        self.w += w;
-        self.wx += w * x;
-        self.wxx += w * x * x;
-        self.wd += w * d;
-        self.wxd += w * x * d;
-        self.wdd += w * d * d;
-        self.ww += w * w;
+        self.fit.add(x, d, 1.0 / var, t);
     }
 
     /// The region's difference at a barometric altitude as a correction,
     /// once enough looks stand, and only when surer than `fallback_sigma_m`
     /// (the uncertainty of taking none).
     pub fn correction(&self, alt_ft: i32, fallback_sigma_m: f64) -> Option<BaroCorrection> {
-        if self.n < MIN_LOOKS {
+        let FadedLine { n, w, ww, .. } = self.fit;
+        if n < MIN_LOOKS {
             return None;
         }
-        let (mx, md) = (self.wx / self.w, self.wd / self.w);
-        let sxx = (self.wxx - self.w * mx * mx).max(0.0);
-        let sxd = self.wxd - self.w * mx * md;
-        let sdd = (self.wdd - self.w * md * md).max(0.0);
-        let sloped = sxx / self.w >= MIN_SPREAD_KFT * MIN_SPREAD_KFT;
-        let slope = if sloped { sxd / sxx } else { 0.0 };
+        let Moments { mx, my: md, sxx, sxy: sxd, syy: sdd, slope, sloped } = self.fit.moments();
         // The weighted residual sum of squares about the line, against the
         // degrees of freedom it would have were the looks' variances all.
         let q = (sdd - slope * sxd).max(0.0);
-        let dof = (self.n - 1.0 - sloped as u8 as f64).max(1.0);
+        let dof = (n - 1.0 - sloped as u8 as f64).max(1.0);
         // Noisy looks hide a spread of tens of metres (one aircraft's looks
         // share its own difference, so they are not as many as they count):
         // the spread taken is the most the looks cannot rule out, Q two of
         // its standard deviations (sqrt(2 dof) under no spread) higher.
-        let spread = self.w - self.ww / self.w;
+        let spread = w - ww / w;
         let tau2 = if spread > 0.0 { ((q - dof + (2.0 * dof).sqrt()) / spread).max(0.0) } else { 0.0 };
         // The line's own variance where it is read, scaled up when the
         // looks scatter more than their variances say.
         let dx = alt_ft as f64 / 1000.0 - mx;
-        let line = (1.0 / self.w + if sloped { dx * dx / sxx } else { 0.0 }) * (q / dof).max(1.0);
+        let line = (1.0 / w + if sloped { dx * dx / sxx } else { 0.0 }) * (q / dof).max(1.0);
         let sigma_m = (tau2 + line).sqrt().max(OWN_DIFF_SIGMA_M);
         let diff_m = md + slope * dx;
         (sigma_m < fallback_sigma_m).then_some(BaroCorrection { diff_ft: diff_m / FT_TO_M, sigma_m })
@@ -278,7 +288,7 @@ impl GeometricBaros {
 
     /// Forgets regions no fix has looked at for a while.
     pub fn prune(&mut self, now: f64) {
-        self.cells.retain(|_, c| now - c.t <= CELL_FORGET_S);
+        self.cells.retain(|_, c| now - c.fit.t <= CELL_FORGET_S);
     }
 
     /// Regions held.
