@@ -61,6 +61,12 @@ struct Judged {
 }
 
 impl Judged {
+    /// From every copy's verdict under its (first) receiver's model.
+    fn new(at: AtFix, all: &[Verdict], sites: &[Site]) -> Judged {
+        let verdicts = all.iter().zip(sites).map(|(v, site)| (site.len() == 1).then_some(*v)).collect();
+        Judged { at, verdicts }
+    }
+
     fn p_late(&self, k: usize) -> f64 {
         self.verdicts[k].map_or(0.0, |v| v.p_late)
     }
@@ -963,16 +969,6 @@ impl Mlat {
         // Hedged against late copies, judged at the fix (as the robust
         // solve already did when its last round found no outlier).
         let judged = judged.or_else(|| (fix.dof > 0).then(|| self.judge(&ms, &sites, alt, &fix)).flatten());
-        // What the fix's geometry says of the barometric altitude's
-        // difference from the ellipsoid height (see [`GeometricBaro`]).
-        let ac = self.aircraft.entry(info.addr).or_default();
-        let look_due = ac.last_baro_look.is_none_or(|t| (now - t).abs() >= BARO_LOOK_EVERY_S);
-        if let (Some(a), Some((ft, var, _)), Some(j), true) = (alt, baro, &judged, look_due) {
-            if let Some((geom_m, geom_var)) = j.at.height_apart(&fix, a) {
-                ac.last_baro_look = Some(now);
-                self.geometric_baro.observe(fix.lat, fix.lon, (geom_m, geom_var), ft, var, now);
-            }
-        }
         let fix = match &judged {
             Some(j) => super::solver::hedge(&fix, &j.at, |k| j.p_late(k)),
             None => fix,
@@ -987,6 +983,16 @@ impl Mlat {
             self.learn(j, &fix, &sites, &sync_vars, &dropped);
         }
         let ac = self.aircraft.entry(info.addr).or_default();
+        // What the fix's geometry says of the barometric altitude's
+        // difference from the ellipsoid height (see [`GeometricBaro`]); the
+        // hedge moved neither the fix nor its linearisation.
+        let look_due = ac.last_baro_look.is_none_or(|t| (now - t).abs() >= BARO_LOOK_EVERY_S);
+        if let (Some(a), Some((ft, var, _)), Some(j), true) = (alt, baro, &judged, look_due) {
+            if let Some((geom_m, geom_var)) = j.at.height_apart(&fix, a) {
+                ac.last_baro_look = Some(now);
+                self.geometric_baro.observe(fix.lat, fix.lon, (geom_m, geom_var), ft, var, now);
+            }
+        }
         ac.last_tried = Some(now);
         if fix.dof >= 1 {
             ac.last_fix = Some((fix.ecef, now));
@@ -1065,18 +1071,15 @@ impl Mlat {
             let Some(at) = AtFix::new(ms, alt, &fix) else {
                 return self.consistent(fix, sites).map(|f| (f, None));
             };
+            let all = self.verdicts(&at, ms, sites);
             let mut worst: Option<(usize, f64)> = None;
-            let mut verdicts = GroupVec::new();
-            for (k, (m, site)) in ms.iter().zip(sites.iter()).enumerate() {
-                let (r, h) = at.residual(k);
-                let v = self.rxs[site[0]].timing.judge(r, h, m.sigma_t.powi(2));
+            for (k, v) in all.iter().enumerate() {
                 if v.outlier() && worst.is_none_or(|(_, s)| v.score() > s) {
                     worst = Some((k, v.score()));
                 }
-                verdicts.push((site.len() == 1).then_some(v));
             }
             let Some((k, _)) = worst else {
-                let judged = Judged { at, verdicts };
+                let judged = Judged::new(at, &all, sites);
                 return self.consistent(fix, sites).map(|f| (f, Some(judged)));
             };
             let (m, site, var) = (ms.remove(k), sites.remove(k), sync_vars.remove(k));
@@ -1095,16 +1098,19 @@ impl Mlat {
         fix: &super::solver::Fix,
     ) -> Option<Judged> {
         let at = AtFix::new(ms, alt, fix)?;
-        let verdicts = (0..ms.len())
-            .map(|k| match sites[k][..] {
-                [rx] => {
-                    let (r, h) = at.residual(k);
-                    Some(self.rxs[rx].timing.judge(r, h, ms[k].sigma_t.powi(2)))
-                }
-                _ => None,
+        let all = self.verdicts(&at, ms, sites);
+        Some(Judged::new(at, &all, sites))
+    }
+
+    /// Each copy's residual at the linearised fix judged under its (first)
+    /// receiver's timing model, with the variance the fix weighted it by.
+    fn verdicts(&self, at: &AtFix, ms: &[Measurement], sites: &[Site]) -> GroupVec<Verdict> {
+        (ms.iter().zip(sites).enumerate())
+            .map(|(k, (m, site))| {
+                let (r, h) = at.residual(k);
+                self.rxs[site[0]].timing.judge(r, h, m.sigma_t.powi(2))
             })
-            .collect();
-        Some(Judged { at, verdicts })
+            .collect()
     }
 
     /// The last copy left out is put back: the fix with it stands.
@@ -1150,8 +1156,8 @@ impl Mlat {
 
     /// Self-calibration: each copy's residual teaches its receiver's timing
     /// model (see [`TimingModel::learn`]), those in the fix with their
-    /// leverage (`residuals`, per site), those left out against the fix of
-    /// the others. A bias
+    /// leverage and verdict at the fix (`judged`, per site), those left out
+    /// against the fix of the others. A bias
     /// common to all receivers is absorbed by the emission time, so only
     /// relative offsets are learnt, which is all the solver needs.
     fn learn(
