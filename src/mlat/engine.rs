@@ -109,8 +109,8 @@ pub struct MlatConfig {
     /// transmission. Mode S only aircraft always get every transmission, and
     /// clock synchronisation always uses every ADS-B position.
     pub adsb_interval_s: f64,
-    /// Use a GPS-timed receiver's position as surveyed from the traffic when
-    /// it is found misplaced (more than 30 m and four sigmas off), instead
+    /// Use a receiver's position as surveyed from the traffic when it is
+    /// found misplaced (more than 30 m and four sigmas off), instead
     /// of the declared one. Off: the offset is only reported.
     pub self_survey: bool,
 }
@@ -554,11 +554,11 @@ impl Mlat {
         });
     }
 
-    /// One ADS-B position, multilaterated: each GPS-timed receiver's range
-    /// excess against the emission time the others give it (see
-    /// [`Survey`]). Counter-timed receivers are not surveyed: their clock
-    /// filters absorb much of a position error (tma-busy's receiver declared
-    /// 300 m off was found 74 m off, with a sigma of metres).
+    /// One ADS-B position, multilaterated: each receiver's range excess
+    /// against the emission time the others give it (see [`Survey`]). A
+    /// counter-timed receiver is surveyed as a GPS-timed one is: its clock
+    /// pairs run on the network's time (the GPS receivers'), which its
+    /// position error does not move, so they do not absorb that error.
     fn survey_from(&mut self, copies: &[LocalCopy], times: &[Option<(f64, f64)>], a: [f64; 3], sigma_a: f64) {
         // (receiver, emission as its copy says and with its learnt offset
         // removed, weight, part of the reference)
@@ -585,9 +585,6 @@ impl Mlat {
             .filter(|x| x.4)
             .fold((0.0, 0.0), |(sw, swe), &(_, _, corrected, w, _)| (sw + w, swe + w * corrected));
         for &(rx, e, corrected, w, in_reference) in &emitted {
-            if self.rxs[rx].clock != ClockKind::Gps {
-                continue;
-            }
             // The others' emission time, leaving this copy out.
             let (w_others, swe_others) = if in_reference { (sw - w, swe - w * corrected) } else { (sw, swe) };
             if w_others <= 0.0 || emitted.len() < 3 {
@@ -598,6 +595,12 @@ impl Mlat {
             // Against its declared position, whatever position is in use.
             let e = e + (ecef_distance(r.ecef, a) - ecef_distance(r.declared_ecef, a)) / C_AIR;
             let range = ecef_distance(r.declared_ecef, a);
+            // Declared beyond any range it could hear the aircraft from (at
+            // 0,0, say): off by more than a linear fit can find, and
+            // excluded for its clock pairs failing instead.
+            if range > self.limits.max_range_m {
+                continue;
+            }
             let u: [f64; 3] = std::array::from_fn(|k| (r.declared_ecef[k] - a[k]) / range);
             let u_enu = r.enu.map(|axis| axis[0] * u[0] + axis[1] * u[1] + axis[2] * u[2]);
             // Timing (its own and the others'), and the ADS-B position's
@@ -1053,7 +1056,8 @@ impl Mlat {
             let fix = match solve(ms, alt, guess, &open) {
                 Ok(f) => f,
                 Err(why) => {
-                    return before.map_or(Err(why), |b| self.undrop(ms, sites, sync_vars, dropped, b))
+                    return before
+                        .map_or(Err(why), |b| self.undrop(ms, sites, sync_vars, dropped, b, guess.is_some()))
                 }
             };
             // Without a copy the equations may have another solution that
@@ -1062,14 +1066,14 @@ impl Mlat {
             // uncertainty of the one with the copy is not the same fix.
             if let Some(b) = before.take() {
                 if !near(&b, &fix) {
-                    return self.undrop(ms, sites, sync_vars, dropped, b);
+                    return self.undrop(ms, sites, sync_vars, dropped, b, guess.is_some());
                 }
             }
             if fix.dof < 3 {
-                return self.consistent(fix, sites).map(|f| (f, None));
+                return self.consistent(fix, sites, guess.is_some()).map(|f| (f, None));
             }
             let Some(at) = AtFix::new(ms, alt, &fix) else {
-                return self.consistent(fix, sites).map(|f| (f, None));
+                return self.consistent(fix, sites, guess.is_some()).map(|f| (f, None));
             };
             let all = self.verdicts(&at, ms, sites);
             let mut worst: Option<(usize, f64)> = None;
@@ -1080,7 +1084,7 @@ impl Mlat {
             }
             let Some((k, _)) = worst else {
                 let judged = Judged::new(at, &all, sites);
-                return self.consistent(fix, sites).map(|f| (f, Some(judged)));
+                return self.consistent(fix, sites, guess.is_some()).map(|f| (f, Some(judged)));
             };
             let (m, site, var) = (ms.remove(k), sites.remove(k), sync_vars.remove(k));
             self.stats.outliers_dropped += 1;
@@ -1121,6 +1125,7 @@ impl Mlat {
         sync_vars: &mut GroupVec<f64>,
         dropped: &mut Dropped,
         fix: super::solver::Fix,
+        anchored: bool,
     ) -> Result<(super::solver::Fix, Option<Judged>), Reject> {
         if let Some((m, site, var)) = dropped.pop() {
             self.stats.outliers_dropped -= 1;
@@ -1128,7 +1133,7 @@ impl Mlat {
             sites.push(site);
             sync_vars.push(var);
         }
-        self.consistent(fix, sites).map(|f| (f, None))
+        self.consistent(fix, sites, anchored).map(|f| (f, None))
     }
 
     /// A fix whose residuals, once the outliers are out, are beyond what
@@ -1137,7 +1142,19 @@ impl Mlat {
     /// variance) has no consistent subset. Within it, the solver's
     /// covariance grows with the residuals, and the receivers' sigmas with
     /// what they learn from them.
-    fn consistent(&self, fix: super::solver::Fix, sites: &[Site]) -> Result<super::solver::Fix, Reject> {
+    ///
+    /// An aircraft's first fix (no earlier one, `anchored` false) with one
+    /// degree of freedom gets no doubt: its equations may have a second
+    /// solution kilometres off, which fits them about as badly as the
+    /// aircraft's own does when one copy is late, and only the plain
+    /// quantile tells the two apart. Taken, it became the guess the next
+    /// fixes started from, so they found it too, and a track began there.
+    fn consistent(
+        &self,
+        fix: super::solver::Fix,
+        sites: &[Site],
+        anchored: bool,
+    ) -> Result<super::solver::Fix, Reject> {
         if fix.dof == 0 {
             return Ok(fix);
         }
@@ -1145,6 +1162,9 @@ impl Mlat {
         let limit = super::solver::chi2_quantile(fix.dof, self.limits.chi2_quantile);
         if fix.chi2 <= limit {
             return Ok(fix);
+        }
+        if !anchored && fix.dof < 2 {
+            return Err(Reject::Residual);
         }
         let doubt =
             (sites.iter().flatten()).map(|&rx| self.rxs[rx].timing.variance_doubt()).fold(1.0, f64::max);
@@ -1450,6 +1470,31 @@ mod tests {
         g.info.addr_known = false;
         assert!(m.on_group(&g, t + 3.2).is_none());
         assert_eq!((m.stats.unverified_address, m.stats.fixes), (1, 2));
+    }
+
+    /// One degree of freedom and residuals past the plain quantile: an
+    /// aircraft's first fix may be the equations' other solution, so it is
+    /// refused; once an earlier fix anchors the aircraft, the same group is
+    /// a fix whose covariance grows with its residuals.
+    #[test]
+    fn a_first_fix_with_one_spare_measurement_must_fit_plainly() {
+        let (mut m, rxs) = engine();
+        let target = geodetic_to_ecef(48.75, 2.40, 30_000.0 * FT_TO_M);
+        let t = 1_700_000_000.0;
+        // One copy 600 ns late: past the plain quantile, within the doubt
+        // of receivers that have learnt nothing yet.
+        let late = |t: f64| {
+            let mut g = group(&rxs[..4], target, t);
+            delay(&mut g.copies[1], 0.6e-6);
+            g
+        };
+        assert!(m.on_group(&late(t), t + 0.2).is_none());
+        assert_eq!(m.stats.rejects.get("residual"), Some(&1));
+        m.on_group(&group(&rxs, target, t + 1.0), t + 1.2).expect("a redundant fix");
+        let f = m.on_group(&late(t + 2.0), t + 2.2).expect("anchored by the earlier fix");
+        let plain = super::super::solver::chi2_quantile(1, 0.999);
+        eprintln!("chi2 {} against {plain}", f.chi2);
+        assert!(f.dof == 1 && f.chi2 > plain, "{f:?}");
     }
 
     #[test]
