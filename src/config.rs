@@ -122,7 +122,7 @@ id = "a"
 lat = 95.0
 lon = 1.0
 alt_m = 0.0
-clock = "atomic"
+clock = "gps"
 beast_id = "12345"
 [receiver.timing]
 sigma_ns = 30
@@ -143,7 +143,6 @@ format = "json"
             "bad.toml: [core] group_wait_s",
             "[service] realtime_priority = 100 must be in 0..=99",
             "[[receiver]] 1 (a): position out of range",
-            "[[receiver]] 1 (a): clock",
             "[[receiver]] 1 (a): beast_id = \"12345\": 16 hex digits or a UUID",
             "[[receiver]] 1 (a): timing: late_rate = 1.5: from 0 to below 1",
             "[[input]] 1: receiver \"nobody\" is not declared",
@@ -152,6 +151,23 @@ format = "json"
         ] {
             assert!(e.contains(needle), "{needle:?} missing from:\n{e}");
         }
+        // Kinds are enums: a misspelt one stops the parse, naming the field,
+        // its line and what it may be.
+        let e = Config::parse(
+            "[[receiver]]\nid = \"a\"\nlat = 0.0\nlon = 0.0\nalt_m = 0.0\nclock = \"atomic\"\n",
+            "c.toml",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("line 6") && e.contains("atomic") && e.contains("expected `beast12` or `gps`"),
+            "{e}"
+        );
+        let e = Config::parse("[service]\nmetrics_listen = \"nowhere\"\n", "m.toml").unwrap_err().to_string();
+        assert!(e.contains("metrics_listen") && e.contains("nowhere"), "{e}");
+        // What is off is absent; the empty string earlier files wrote is read so.
+        let c = Config::parse("[service]\nrecord = \"\"\nmetrics_listen = \"\"\n", "old.toml").unwrap();
+        assert_eq!((c.service.record, c.service.metrics_listen), (None, None));
         let demo = concat!(env!("CARGO_MANIFEST_DIR"), "/config/demo.toml");
         assert!(Config::load(std::path::Path::new(demo)).is_ok());
     }

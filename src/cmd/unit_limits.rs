@@ -43,7 +43,7 @@ pub fn limits(cfg: &Config, allow: &[IpAddr], name: &str) -> String {
             InputKind::BeastTcpClient => false,
         };
     }
-    if let Ok(a) = cfg.service.metrics_listen.parse::<std::net::SocketAddr>() {
+    if let Some(a) = cfg.service.metrics_listen {
         binds.insert(format!("tcp:{}", a.port()));
     }
     for b in &binds {
@@ -92,7 +92,7 @@ fn peers(cfg: &Config, allow: &[IpAddr]) -> Result<BTreeSet<IpAddr>, String> {
             addrs.insert(a.ip());
         }
     }
-    if let Ok(a) = cfg.service.metrics_listen.parse::<std::net::SocketAddr>() {
+    if let Some(a) = cfg.service.metrics_listen {
         if !a.ip().is_loopback() && allow.is_empty() {
             return Err(format!(
                 "metrics on {a} answer scrapers this file cannot name (add them with --allow)"

@@ -3,18 +3,21 @@
 //! once, each with the table it is in (`[[input]] 2: ...`).
 
 use std::net::{IpAddr, SocketAddr};
+use std::path::PathBuf;
 
-use serde::{Deserialize, Serialize};
+use serde::{Deserialize, Deserializer, Serialize};
 
 use crate::core::front::KnownReceiver;
 use crate::feed::capture::{ClockKind, ReceiverDecl};
+use crate::feed::detect::InputFormat;
 use crate::mlat::timing::KnownTiming;
 
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct ServiceConfig {
-    /// Record every frame received to this capture file (v1), for replay; empty: off.
-    pub record: String,
+    /// Record every frame received to this capture file (v1), for replay.
+    #[serde(deserialize_with = "off_if_empty", skip_serializing_if = "Option::is_none")]
+    pub record: Option<PathBuf>,
     /// The recording is rotated (`FILE` → `FILE.1` ...) at this size (bytes) ...
     pub record_max_bytes: u64,
     /// ... or this age (s), whichever comes first ...
@@ -22,12 +25,14 @@ pub struct ServiceConfig {
     /// ... keeping this many rotated files beside the current one.
     pub record_keep: usize,
     /// What multilateration has learnt of each receiver (timing, position
-    /// survey), saved here at shutdown and taken up at start; empty: off.
-    pub state_file: String,
+    /// survey), saved here at shutdown and taken up at start.
+    #[serde(deserialize_with = "off_if_empty", skip_serializing_if = "Option::is_none")]
+    pub state_file: Option<PathBuf>,
     /// One stats line in the log this often (s).
     pub stats_interval_s: f64,
-    /// Prometheus text endpoint (host:port); empty: off.
-    pub metrics_listen: String,
+    /// Prometheus text endpoint (host:port).
+    #[serde(deserialize_with = "off_if_empty", skip_serializing_if = "Option::is_none")]
+    pub metrics_listen: Option<SocketAddr>,
     /// ASTERIX data source identifier and service identification.
     pub sac: u8,
     pub sic: u8,
@@ -36,8 +41,9 @@ pub struct ServiceConfig {
     pub max_datagram_bytes: usize,
     /// Frames waiting between the inputs and the core; beyond it frames are dropped and counted.
     pub queue_frames: usize,
-    /// Demo: replay this capture into our own inputs at start (empty: off), at this speed.
-    pub demo_capture: String,
+    /// Demo: replay this capture into our own inputs at start, at this speed.
+    #[serde(deserialize_with = "off_if_empty", skip_serializing_if = "Option::is_none")]
+    pub demo_capture: Option<PathBuf>,
     pub demo_speed: f64,
     /// Realtime round-robin priority (1-99) for the service's threads, so
     /// other processes on the machine cannot delay a frame's way through;
@@ -48,23 +54,38 @@ pub struct ServiceConfig {
 impl Default for ServiceConfig {
     fn default() -> Self {
         ServiceConfig {
-            record: String::new(),
+            record: None,
             record_max_bytes: 1 << 30,
             record_max_age_s: 3600.0,
             record_keep: 8,
-            state_file: String::new(),
+            state_file: None,
             stats_interval_s: 60.0,
-            metrics_listen: String::new(),
+            metrics_listen: None,
             sac: 0,
             sic: 1,
             service_id: 1,
             max_datagram_bytes: 1400,
             queue_frames: 65_536,
-            demo_capture: String::new(),
+            demo_capture: None,
             demo_speed: 1.0,
             realtime_priority: 0,
         }
     }
+}
+
+/// What can be off is off when absent; an empty string, which earlier
+/// configurations wrote for it, is read as absent too.
+fn off_if_empty<'de, D, T>(d: D) -> Result<Option<T>, D::Error>
+where
+    D: Deserializer<'de>,
+    T: std::str::FromStr,
+    T::Err: std::fmt::Display,
+{
+    let text = String::deserialize(d)?;
+    if text.is_empty() {
+        return Ok(None);
+    }
+    text.parse().map(Some).map_err(|e| serde::de::Error::custom(format!("{text:?}: {e}")))
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -75,8 +96,8 @@ pub struct ReceiverConfig {
     pub lon: f64,
     /// Antenna height above the WGS-84 ellipsoid (m).
     pub alt_m: f64,
-    /// "beast12" (free-running 12 MHz counter) or "gps" (Radarcape GPS time).
-    pub clock: String,
+    /// beast12 (free-running 12 MHz counter) or gps (Radarcape GPS time).
+    pub clock: ClockKind,
     /// Source address that identifies it on TCP-server and UDP inputs.
     #[serde(default)]
     pub source: Option<IpAddr>,
@@ -162,7 +183,7 @@ impl ReceiverConfig {
             lat: 0.0,
             lon: 0.0,
             alt_m: 0.0,
-            clock: "beast12".into(),
+            clock: ClockKind::Beast12,
             source: None,
             beast_id: beast_id.map(Into::into),
             beast_id_takeover: false,
@@ -172,8 +193,7 @@ impl ReceiverConfig {
     }
 
     pub fn decl(&self) -> ReceiverDecl {
-        let clock = if self.clock == "gps" { ClockKind::Gps } else { ClockKind::Beast12 };
-        ReceiverDecl { id: self.id.clone(), lat: self.lat, lon: self.lon, alt: self.alt_m, clock }
+        ReceiverDecl { id: self.id.clone(), lat: self.lat, lon: self.lon, alt: self.alt_m, clock: self.clock }
     }
 
     /// What the core is told of it.
@@ -219,9 +239,9 @@ pub struct InputConfig {
     /// empty: any receiver with either.
     #[serde(default)]
     pub receivers: Vec<String>,
-    /// udp: "beast" or "avr".
+    /// udp: beast or avr.
     #[serde(default = "beast")]
-    pub format: String,
+    pub format: InputFormat,
     /// TCP inputs: a connection that brings nothing for this long (s) is
     /// closed (a client then reconnects); 0: never. A receiver always has
     /// traffic, and readsb and dump1090 send a heartbeat on an idle Beast
@@ -249,8 +269,8 @@ impl InputConfig {
     }
 }
 
-fn beast() -> String {
-    "beast".into()
+fn beast() -> InputFormat {
+    InputFormat::Beast
 }
 
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
@@ -260,12 +280,21 @@ pub enum OutputFormat {
     Asterix062,
 }
 
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum OutputKind {
+    /// Datagrams, unicast or multicast.
+    Udp,
+    /// JSON lines on standard output, for a look.
+    Stdout,
+}
+
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct OutputConfig {
-    /// "udp" (unicast or multicast) or "stdout" (JSON lines, for a look).
+    /// udp or stdout.
     #[serde(default = "udp")]
-    pub kind: String,
+    pub kind: OutputKind,
     #[serde(default)]
     pub address: Option<SocketAddr>,
     pub format: OutputFormat,
@@ -276,8 +305,8 @@ pub struct OutputConfig {
     pub multicast_interface: Option<std::net::Ipv4Addr>,
 }
 
-fn udp() -> String {
-    "udp".into()
+fn udp() -> OutputKind {
+    OutputKind::Udp
 }
 
 fn one() -> u32 {
@@ -295,14 +324,9 @@ pub fn validate(
     if !(service.stats_interval_s > 0.0 && service.stats_interval_s.is_finite()) {
         errs.push(format!("[service] stats_interval_s = {} must be positive", service.stats_interval_s));
     }
-    match service.metrics_listen.parse::<SocketAddr>() {
-        _ if service.metrics_listen.is_empty() => {}
-        Err(_) => {
-            errs.push(format!("[service] metrics_listen = {:?} is not host:port", service.metrics_listen))
-        }
-        // Port 0 would listen on a port the kernel picks and nobody knows.
-        Ok(a) if a.port() == 0 => errs.push("[service] metrics_listen: port 0 is no port".into()),
-        Ok(_) => {}
+    // Port 0 would listen on a port the kernel picks and nobody knows.
+    if service.metrics_listen.is_some_and(|a| a.port() == 0) {
+        errs.push("[service] metrics_listen: port 0 is no port".into());
     }
     if !(64..=65_000).contains(&service.max_datagram_bytes) {
         errs.push(format!(
@@ -335,9 +359,6 @@ pub fn validate(
         }
         if !(r.lat.abs() <= 90.0 && r.lon.abs() <= 180.0 && r.alt_m.is_finite()) {
             errs.push(format!("{at}: position out of range"));
-        }
-        if r.clock != "beast12" && r.clock != "gps" {
-            errs.push(format!("{at}: clock = {:?}: beast12 or gps", r.clock));
         }
         if let Some(s) = r.source {
             if receivers[..i].iter().any(|o| o.source == Some(s)) {
@@ -380,24 +401,22 @@ pub fn validate(
         if !(input.idle_timeout_s >= 0.0 && input.idle_timeout_s.is_finite()) {
             errs.push(format!("{at}: idle_timeout_s = {} must be zero or positive", input.idle_timeout_s));
         }
-        if input.format != "beast" && input.format != "avr" {
-            errs.push(format!("{at}: format = {:?}: beast or avr", input.format));
+        if input.format == InputFormat::Hex {
+            errs.push(format!("{at}: format = hex: beast or avr"));
         }
-        if input.format == "avr" && input.kind != InputKind::Udp {
+        if input.format == InputFormat::Avr && input.kind != InputKind::Udp {
             errs.push(format!("{at}: avr only over udp"));
         }
     }
     for (i, o) in outputs.iter().enumerate() {
         let at = format!("[[output]] {}", i + 1);
-        match o.kind.as_str() {
-            "udp" if o.address.is_none() => errs.push(format!("{at}: udp needs address")),
-            "udp" | "stdout" => {}
-            k => errs.push(format!("{at}: kind = {k:?}: udp or stdout")),
+        if o.kind == OutputKind::Udp && o.address.is_none() {
+            errs.push(format!("{at}: udp needs address"));
         }
         if o.address.is_some_and(|a| a.port() == 0) {
             errs.push(format!("{at}: address: port 0 is no port"));
         }
-        if o.kind == "stdout" && o.format != OutputFormat::Json {
+        if o.kind == OutputKind::Stdout && o.format != OutputFormat::Json {
             errs.push(format!("{at}: stdout prints json only"));
         }
     }

@@ -291,7 +291,7 @@ async fn udp(
     tx: &SyncSender<ToCore>,
     reg: &Registry,
 ) -> std::io::Result<()> {
-    let format = if input.format == "avr" { InputFormat::Avr } else { InputFormat::Beast };
+    let format = input.format;
     let fixed = input.receiver.as_deref().and_then(|id| reg.index_of(id));
     let mut parsers: HashMap<usize, Box<dyn FrameParser + Send>> = HashMap::new();
     // Known senders' receiver, counters and rate: a datagram costs no scan

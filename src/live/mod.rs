@@ -149,8 +149,7 @@ fn realtime(priority: u8) -> std::io::Result<()> {
 async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
     let registry = Arc::new(Registry { queue_frames: cfg.service.queue_frames, ..Default::default() });
     let mut metrics_task = None;
-    if !cfg.service.metrics_listen.is_empty() {
-        let addr: std::net::SocketAddr = cfg.service.metrics_listen.parse().context("metrics_listen")?;
+    if let Some(addr) = cfg.service.metrics_listen {
         let listener = tokio::net::TcpListener::bind(addr)
             .await
             .with_context(|| format!("the Prometheus endpoint cannot bind {addr}"))?;
@@ -171,23 +170,23 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
         decls.push(r.known());
     }
     let outputs = Outputs::new(&cfg.output, &cfg.service);
-    let recorder = match cfg.service.record.as_str() {
-        "" => None,
-        p => {
+    let recorder = match &cfg.service.record {
+        None => None,
+        Some(p) => {
             let limits = record::RecordLimits {
-                path: p.into(),
+                path: p.clone(),
                 max_bytes: cfg.service.record_max_bytes,
                 max_age_s: cfg.service.record_max_age_s,
                 keep: cfg.service.record_keep,
             };
             Some(
                 Recorder::open(limits, unix_now())
-                    .with_context(|| format!("cannot create the recording {p}"))?,
+                    .with_context(|| format!("cannot create the recording {}", p.display()))?,
             )
         }
     };
     let stats_every = cfg.service.stats_interval_s;
-    let state_file = (!cfg.service.state_file.is_empty()).then(|| PathBuf::from(&cfg.service.state_file));
+    let state_file = cfg.service.state_file.clone();
     // Every port bound before anything runs: one that is taken (another
     // daemon, a stale instance) fails the start, where systemd shows it.
     let bound = inputs::bind_all(&cfg.input).await.map_err(anyhow::Error::msg)?;
@@ -213,9 +212,8 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
     // Apart from the inputs' tasks: a reload that replaces the inputs must
     // not end the demo's replay.
     let mut demo_task = None;
-    if !cfg.service.demo_capture.is_empty() {
-        let (capture, speed, demo_cfg) =
-            (PathBuf::from(&cfg.service.demo_capture), cfg.service.demo_speed, cfg.clone());
+    if let Some(capture) = cfg.service.demo_capture.clone() {
+        let (speed, demo_cfg) = (cfg.service.demo_speed, cfg.clone());
         demo_task = Some(tokio::spawn(async move {
             match replay::replay(&capture, &demo_cfg, speed).await {
                 Ok(n) => tracing::info!(frames = n, "demo replay finished"),

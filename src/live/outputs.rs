@@ -16,7 +16,7 @@ use std::sync::{Arc, OnceLock};
 
 use socket2::{Domain, Protocol, Socket, Type};
 
-use super::config::{OutputConfig, OutputFormat, ServiceConfig};
+use super::config::{OutputConfig, OutputFormat, OutputKind, ServiceConfig};
 use crate::core::Event;
 use crate::publish::{asterix, json};
 
@@ -34,9 +34,9 @@ impl Destination {
     /// Sends that failed (for stdout, the writer's failed writes, which
     /// every stdout output shares).
     pub fn errors(&self) -> u64 {
-        match self.cfg.kind.as_str() {
-            "stdout" => self.errors + stdout_writer().errors.load(Ordering::Relaxed),
-            _ => self.errors,
+        match self.cfg.kind {
+            OutputKind::Stdout => self.errors + stdout_writer().errors.load(Ordering::Relaxed),
+            OutputKind::Udp => self.errors,
         }
     }
 }
@@ -128,8 +128,8 @@ impl Outputs {
         let dests = cfgs
             .iter()
             .map(|c| {
-                let socket = match (c.kind.as_str(), c.address) {
-                    ("udp", Some(a)) => match udp_socket(c, a) {
+                let socket = match (c.kind, c.address) {
+                    (OutputKind::Udp, Some(a)) => match udp_socket(c, a) {
                         Ok(s) => Some(s),
                         Err(e) => {
                             tracing::error!(address = %a, "output socket: {e}");
@@ -190,7 +190,7 @@ impl Outputs {
                     asterix::blocks(&records, self.max_bytes)
                 }),
             };
-            if d.cfg.kind == "stdout" {
+            if d.cfg.kind == OutputKind::Stdout {
                 let writer = stdout_writer();
                 for p in payloads.iter() {
                     writer.pending.fetch_add(1, Ordering::AcqRel);

@@ -24,6 +24,7 @@ use super::unix_now;
 use crate::config::Config;
 use crate::feed::beast;
 use crate::feed::capture::{CaptureReader, CaptureRecord, ClockKind};
+use crate::feed::detect::InputFormat;
 use crate::feed::RawFrame;
 
 /// How one receiver reaches the daemon.
@@ -48,7 +49,9 @@ fn route(cfg: &Config, id: &str) -> Option<Route> {
         match input.kind {
             InputKind::BeastTcpClient => return Some(Route::Serve(input.address)),
             InputKind::BeastTcpServer => return Some(Route::Connect(target, r.source, r.beast_name())),
-            InputKind::Udp if input.format == "beast" => return Some(Route::Datagram(target, r.source)),
+            InputKind::Udp if input.format == InputFormat::Beast => {
+                return Some(Route::Datagram(target, r.source))
+            }
             InputKind::Udp => {}
         }
     }

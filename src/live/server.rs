@@ -283,7 +283,7 @@ mod tests {
             address,
             receiver: None,
             receivers: Vec::new(),
-            format: "beast".into(),
+            format: crate::feed::detect::InputFormat::Beast,
             idle_timeout_s: 0.0,
         };
         (input, address)
