@@ -13,7 +13,6 @@ use super::state::{LearntReceiver, LearntState};
 use super::survey::{enu_basis, Survey};
 use super::timing::{KnownTiming, TimingModel, Verdict};
 use crate::FastMap;
-use std::collections::HashMap;
 
 use serde::Deserialize;
 
@@ -199,7 +198,26 @@ pub struct MlatStats {
     /// their own aircraft's ADS-B: a network short of other references.
     pub self_synced_fixes: u64,
     pub unverified_address: u64,
-    pub rejects: HashMap<&'static str, u64>,
+    pub rejects: RejectCounts,
+}
+
+/// Groups that gave no fix, counted per reason.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RejectCounts([u64; Reject::ALL.len()]);
+
+impl RejectCounts {
+    pub fn get(&self, why: Reject) -> u64 {
+        self.0[why.index()]
+    }
+
+    fn add(&mut self, why: Reject) {
+        self.0[why.index()] += 1;
+    }
+
+    /// Every reason with its count, zeros included.
+    pub fn iter(&self) -> impl Iterator<Item = (Reject, u64)> + '_ {
+        Reject::ALL.iter().map(|&why| (why, self.get(why)))
+    }
 }
 
 struct Rx {
@@ -449,7 +467,10 @@ impl Mlat {
             .collect();
         let excluded: Vec<String> =
             self.sync.health.iter().enumerate().filter(|(_, h)| h.excluded).map(|(k, _)| names(k)).collect();
-        let mut rejects: Vec<String> = self.stats.rejects.iter().map(|(k, v)| format!("{k}={v}")).collect();
+        let mut rejects: Vec<String> = (self.stats.rejects.iter())
+            .filter(|&(_, n)| n > 0)
+            .map(|(why, n)| format!("{}={n}", why.name()))
+            .collect();
         rejects.sort();
         // Receivers whose declared position the traffic contradicts.
         let misplaced: Vec<String> = (self.rxs.iter().enumerate())
@@ -535,7 +556,7 @@ impl Mlat {
     }
 
     fn reject(&mut self, why: Reject) {
-        *self.stats.rejects.entry(why.name()).or_default() += 1;
+        self.stats.rejects.add(why);
     }
 
     /// Forgets aircraft not heard of for [`AIRCRAFT_TTL_S`] (a banned sync
@@ -1460,7 +1481,7 @@ mod tests {
         let target = geodetic_to_ecef(48.75, 2.40, 30_000.0 * FT_TO_M);
         let t = 1_700_000_000.0;
         assert!(m.on_group(&group(&rxs[..3], target, t), t + 0.2).is_none());
-        assert_eq!(m.stats.rejects.get("ambiguous"), Some(&1));
+        assert_eq!(m.stats.rejects.get(Reject::Ambiguous), 1);
         assert_eq!(m.take_tdoa().map(|g| g.sites.len()), Some(3));
         m.on_group(&group(&rxs, target, t + 1.0), t + 1.2).expect("a redundant fix");
         let f = m.on_group(&group(&rxs[..3], target, t + 2.0), t + 2.2).expect("chosen by the earlier fix");
@@ -1489,7 +1510,7 @@ mod tests {
             g
         };
         assert!(m.on_group(&late(t), t + 0.2).is_none());
-        assert_eq!(m.stats.rejects.get("residual"), Some(&1));
+        assert_eq!(m.stats.rejects.get(Reject::Residual), 1);
         m.on_group(&group(&rxs, target, t + 1.0), t + 1.2).expect("a redundant fix");
         let f = m.on_group(&late(t + 2.0), t + 2.2).expect("anchored by the earlier fix");
         let plain = super::super::solver::chi2_quantile(1, 0.999);
@@ -1514,13 +1535,13 @@ mod tests {
         g.copies[3].timestamp =
             ClockKind::gps_timestamp(ClockKind::gps_unix(g.copies[3].timestamp, t) + 3e-6);
         assert!(m.on_group(&g, t + 1.0).is_none());
-        assert_eq!(m.stats.rejects.get("residual"), Some(&1));
+        assert_eq!(m.stats.rejects.get(Reject::Residual), 1);
         // An address nothing verified, exactly determined: no fix (with no
         // earlier fix to choose its solution, it is ambiguous first).
         let mut g = group(&rxs[..3], target, t + 2.0);
         g.info.addr_known = false;
         assert!(m.on_group(&g, t + 2.0).is_none());
-        assert_eq!(m.stats.rejects.get("ambiguous"), Some(&1));
+        assert_eq!(m.stats.rejects.get(Reject::Ambiguous), 1);
         // Two copies only: too few.
         let g = group(&rxs[..2], target, t + 3.0);
         assert!(m.on_group(&g, t + 3.0).is_none());

@@ -115,6 +115,11 @@ impl Reject {
         Reject::Gdop,
         Reject::Ambiguous,
     ];
+    /// Its place in [`Reject::ALL`].
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             Reject::TooFewMeasurements => "too_few",
@@ -587,6 +592,13 @@ mod tests {
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
     use rand_distr::{Distribution, Normal as Gauss, StandardNormal};
+
+    #[test]
+    fn each_reject_is_counted_in_its_own_place() {
+        for (i, why) in Reject::ALL.iter().enumerate() {
+            assert_eq!(why.index(), i, "{why:?}");
+        }
+    }
 
     /// ECEF of (lat, lon, height) sites.
     fn ecef(sites: &[(f64, f64, f64)]) -> Vec<[f64; 3]> {
