@@ -738,7 +738,7 @@ impl Mlat {
         let receivers = (self.rxs.iter())
             .map(|r| LearntReceiver {
                 id: r.id.clone(),
-                clock: r.clock.name().to_string(),
+                clock: r.clock,
                 lat: r.declared.0,
                 lon: r.declared.1,
                 alt_m: r.declared.2,
@@ -763,7 +763,7 @@ impl Mlat {
             }
             let Some(l) = state.receivers.iter().find(|l| l.id == r.id) else { continue };
             let same_place = geodetic_to_ecef(l.lat, l.lon, l.alt_m);
-            if l.clock != r.clock.name() || ecef_distance(same_place, r.declared_ecef) > 1.0 {
+            if l.clock != r.clock || ecef_distance(same_place, r.declared_ecef) > 1.0 {
                 continue;
             }
             if !(l.bias_s.is_finite() && l.var_s2.is_finite() && l.var_s2 >= 0.0) {

@@ -12,6 +12,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::feed::capture::ClockKind;
+
 /// The file's version: a file of another version is ignored (and said so).
 pub const VERSION: u32 = 1;
 
@@ -25,7 +27,7 @@ pub struct LearntState {
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 pub struct LearntReceiver {
     pub id: String,
-    pub clock: String,
+    pub clock: ClockKind,
     pub lat: f64,
     pub lon: f64,
     pub alt_m: f64,
