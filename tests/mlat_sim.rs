@@ -470,6 +470,42 @@ fn self_survey_puts_the_misplaced_receiver_where_it_is_and_learning_nears_the_or
     assert!(known < surveyed, "{surveyed:.1} m surveyed, {known:.1} m oracle");
 }
 
+/// A counter-timed receiver declared 300 m off (tma-busy's rx05), with
+/// `self_survey`: used where the traffic says it is, its learnt sigma that
+/// of an honest counter, and the fixes' median error below that of the
+/// run that leaves it out.
+#[test]
+fn self_survey_moves_a_misplaced_counter_where_it_is() {
+    let mut s = tma_busy_cut(300.0, 40, 10, 0);
+    for r in &mut s.receiver {
+        r.burst_per_min = 0.0;
+    }
+    let (capture, truth_bytes) = sim(&s);
+    let truth = Truth::read(&truth_bytes[..]).unwrap();
+    let run = |self_survey: bool| {
+        let mut cfg = CoreConfig::default();
+        cfg.mlat.self_survey = self_survey;
+        let (core, events, rxs) = run_core(&capture, &cfg);
+        assert_eq!(rxs[4].id, "rx05");
+        let r = core.mlat().receiver_report(4, s.start_unix + s.duration_s);
+        (r, core.mlat().timing(4).sigma(), fix_median_error(&events, &truth))
+    };
+    let (left_out, _, declared) = run(false);
+    let (used, sigma, surveyed) = run(true);
+    eprintln!(
+        "rx05: {used:?}, sigma {:.0} ns; fixes' median {declared:.1} m left out, {surveyed:.1} m surveyed",
+        sigma * 1e9
+    );
+    assert_eq!(left_out.reason, Some(fuse1090::mlat::Exclusion::Misplaced));
+    assert_eq!((used.state, used.reason), (RxState::Ok, None));
+    let ([e, n], [te, tn]) = (used.position_offset_en_m.unwrap(), truth.receivers[4].position_offset_en_m);
+    assert!((e - te).hypot(n - tn) < 30.0, "found {e:+.1},{n:+.1} m, true {te:+.0},{tn:+.0}");
+    // Its jitter is 83 ns: a position error still in its copies would show
+    // as hundreds.
+    assert!(sigma < 150e-9, "rx05 learnt {:.0} ns", sigma * 1e9);
+    assert!(surveyed < declared, "{declared:.1} m left out, {surveyed:.1} m surveyed");
+}
+
 /// network-rough's capture with hostile receivers: n08 sending random
 /// timestamps, n03 (GPS) whose time jumps a second ahead for 100 s and
 /// again for 20 s, n12 declared at 0,0. Without them (n08 and n12 left out
