@@ -1,0 +1,136 @@
+//! Where each receiver is: the position survey fed from the ADS-B traffic
+//! (see [`Survey`](crate::mlat::survey::Survey)), and what its verdict does
+//! to the receiver, leaving it out of fixes or, with `self_survey`, moving
+//! it. Apart from the engine's per-group path so that the receivers'
+//! placement reads on its own; the engine calls [`Mlat::survey_from`] once
+//! per ADS-B group.
+use super::{GroupVec, LocalCopy, Mlat, SURVEY_CHECK_EVERY};
+use crate::feed::capture::ClockKind;
+use crate::geo::{ecef_distance, geodetic_to_ecef};
+use crate::mlat::solver::C_AIR;
+
+impl Mlat {
+    /// One ADS-B position, multilaterated: each receiver's range excess
+    /// against the emission time the others give it (see
+    /// [`Survey`](crate::mlat::survey::Survey)). A counter-timed receiver is
+    /// surveyed as a GPS-timed one is: its clock pairs run on the network's
+    /// time (the GPS receivers'), which its position error does not move, so
+    /// they do not absorb that error.
+    pub(super) fn survey_from(
+        &mut self,
+        copies: &[LocalCopy],
+        times: &[Option<(f64, f64)>],
+        a: [f64; 3],
+        sigma_a: f64,
+    ) {
+        // (receiver, emission as its copy says and with its learnt offset
+        // removed, weight, part of the reference)
+        let mut emitted: GroupVec<(usize, f64, f64, f64, bool)> = GroupVec::new();
+        for (c, t) in copies.iter().zip(times) {
+            let Some((t, var)) = t else { continue };
+            let rx = &self.rxs[c.rx];
+            let w = 1.0 / (var + rx.sigma().powi(2));
+            // A receiver is surveyed without its learnt offset: the survey
+            // fits its own constant, and a misplaced receiver's timing
+            // offset, learnt from fixes its wrong position pulled, is no
+            // constant. The reference is corrected (a GPS receiver's offset
+            // came off in the common time base, a counter's comes off here).
+            let e = t - ecef_distance(rx.ecef, a) / C_AIR;
+            let (raw, corrected) = match rx.clock {
+                ClockKind::Gps => (e + rx.bias(), e),
+                ClockKind::Beast12 => (e, e - rx.bias()),
+            };
+            // An excluded receiver (a misplaced one, say) is surveyed but
+            // is no one's reference.
+            emitted.push((c.rx, raw, corrected, w, !self.out_of_fixes(c.rx)));
+        }
+        let (sw, swe) = (emitted.iter())
+            .filter(|x| x.4)
+            .fold((0.0, 0.0), |(sw, swe), &(_, _, corrected, w, _)| (sw + w, swe + w * corrected));
+        for &(rx, e, corrected, w, in_reference) in &emitted {
+            // The others' emission time, leaving this copy out.
+            let (w_others, swe_others) = if in_reference { (sw - w, swe - w * corrected) } else { (sw, swe) };
+            if w_others <= 0.0 || emitted.len() < 3 {
+                continue;
+            }
+            let t_emit = swe_others / w_others;
+            let r = &self.rxs[rx];
+            // Against its declared position, whatever position is in use.
+            let e = e + (ecef_distance(r.ecef, a) - ecef_distance(r.declared_ecef, a)) / C_AIR;
+            let range = ecef_distance(r.declared_ecef, a);
+            // Declared beyond any range it could hear the aircraft from (at
+            // 0,0, say): off by more than a linear fit can find, and
+            // excluded for its clock pairs failing instead.
+            if range > self.limits.max_range_m {
+                continue;
+            }
+            let u: [f64; 3] = std::array::from_fn(|k| (r.declared_ecef[k] - a[k]) / range);
+            let u_enu = r.enu.map(|axis| axis[0] * u[0] + axis[1] * u[1] + axis[2] * u[2]);
+            // Timing (its own and the others'), and the ADS-B position's
+            // error, which moves its range and the others' differently.
+            let var = C_AIR * C_AIR * (1.0 / w + 1.0 / w_others) + 2.0 * sigma_a * sigma_a;
+            self.rxs[rx].survey.add(u_enu, C_AIR * (e - t_emit), var);
+            if self.rxs[rx].survey.count() % SURVEY_CHECK_EVERY == 0 {
+                if self.cfg.self_survey {
+                    self.apply_survey(rx);
+                } else {
+                    self.judge_position(rx);
+                }
+            }
+        }
+    }
+
+    /// Without `self_survey`, a receiver its survey finds misplaced is left
+    /// out of fixes (its wrong position would pull each one), and taken back
+    /// if the survey stops saying so.
+    fn judge_position(&mut self, rx: usize) {
+        let r = &mut self.rxs[rx];
+        let offset = r.survey.offset();
+        let misplaced = offset.is_some_and(|o| o.misplaced());
+        if misplaced == r.misplaced {
+            return;
+        }
+        r.misplaced = misplaced;
+        match offset.filter(|_| misplaced) {
+            Some(o) => tracing::warn!(
+                receiver = %r.id,
+                east_m = format!("{:+.0}", o.enu_m[0]),
+                north_m = format!("{:+.0}", o.enu_m[1]),
+                sigma_m = format!("{:.0}", o.sigma_m),
+                "receiver excluded from MLAT: its declared position is wrong (set self_survey = true to use the surveyed one)"
+            ),
+            None => {
+                tracing::info!(receiver = %r.id, "receiver readmitted to MLAT: its survey agrees with its declared position")
+            }
+        }
+    }
+
+    /// Puts a misplaced receiver where the traffic says it is (or back where
+    /// it was declared once the survey no longer says so). Its clock pairs
+    /// start again: what they learnt rested on the old position.
+    fn apply_survey(&mut self, rx: usize) {
+        let r = &self.rxs[rx];
+        let target =
+            r.survey.offset().filter(|o| o.misplaced()).map(|o| ([o.enu_m[0], o.enu_m[1]], o.sigma_m));
+        let moved = match (r.surveyed, target) {
+            (None, None) => false,
+            (Some(a), Some((t, sigma))) => (a[0] - t[0]).hypot(a[1] - t[1]) > (3.0 * sigma).max(10.0),
+            _ => true,
+        };
+        if !moved {
+            return;
+        }
+        let (lat, lon, alt) = r.declared;
+        let r = &mut self.rxs[rx];
+        r.surveyed = target.map(|t| t.0);
+        r.ecef = match r.surveyed {
+            Some([e, n]) => {
+                let (la, lo, h) = crate::geo::displace(lat, lon, alt, [e, n, 0.0]);
+                geodetic_to_ecef(la, lo, h)
+            }
+            None => r.declared_ecef,
+        };
+        tracing::info!(receiver = %r.id, offset_en_m = ?r.surveyed, "self-survey: the receiver's position in use changed");
+        self.sync.reset_pairs(rx);
+    }
+}
