@@ -1,0 +1,119 @@
+//! What is known of each receiver: its report (state, the reason it is left
+//! out, its learnt timing and position offset) for the run report, the
+//! stats line, Prometheus and the track stream, and what has been learnt of
+//! it kept across a restart (`[service] state_file`). Apart from the
+//! engine's per-group path: read by the operator, not by the solver.
+
+use super::{Mlat, JUMPS_EXCLUDE};
+use crate::feed::capture::ClockKind;
+use crate::geo::{ecef_distance, geodetic_to_ecef};
+use crate::mlat::report::{Exclusion, ReceiverReport, RxState};
+use crate::mlat::state::{LearntReceiver, LearntState};
+use crate::mlat::survey::Survey;
+use crate::mlat::timing::TimingModel;
+
+impl Mlat {
+    /// What is known of receiver `rx` at data time `t` (see [`ReceiverReport`]).
+    pub fn receiver_report(&self, rx: usize, t: f64) -> ReceiverReport {
+        let (r, h) = (&self.rxs[rx], &self.sync.health[rx]);
+        let learnt = r.timing.learnt();
+        let reason = if r.jumps > JUMPS_EXCLUDE {
+            Some(Exclusion::TimeJumps)
+        } else if r.misplaced {
+            Some(Exclusion::Misplaced)
+        } else {
+            h.excluded.then_some(Exclusion::SyncFailing)
+        };
+        let state = if reason.is_some() {
+            RxState::Excluded
+        } else if learnt || h.sync_updates >= crate::mlat::sync::HEALTH_MIN_UPDATES {
+            RxState::Ok
+        } else {
+            RxState::Learning
+        };
+        // Biases are relative (a common one goes into the emission time):
+        // a GPS receiver's is told against the other GPS receivers' mean.
+        let gps: Vec<f64> = (self.rxs.iter())
+            .filter(|o| o.clock == ClockKind::Gps && o.timing.learnt())
+            .map(|o| o.timing.offset_s)
+            .collect();
+        let offset_ns = (r.clock == ClockKind::Gps && learnt && gps.len() >= 2)
+            .then(|| (r.timing.offset_s - gps.iter().sum::<f64>() / gps.len() as f64) * 1e9);
+        let offset = r.survey.offset();
+        ReceiverReport {
+            t,
+            rx,
+            state,
+            reason,
+            sigma_ns: learnt.then(|| r.timing.sigma() * 1e9),
+            offset_ns,
+            outlier_rate: learnt.then_some(r.timing.late_rate),
+            late_delay_ns: learnt.then_some(r.timing.late_mean_s * 1e9),
+            position_offset_en_m: offset.map(|o| [o.enu_m[0], o.enu_m[1]]),
+            position_offset_sigma_m: offset.map(|o| o.sigma_m),
+        }
+    }
+
+    /// What has been learnt of every receiver, to be kept across a restart.
+    pub fn learnt(&self, saved_unix: f64) -> LearntState {
+        let receivers = (self.rxs.iter())
+            .map(|r| LearntReceiver {
+                id: r.id.clone(),
+                clock: r.clock,
+                lat: r.declared.0,
+                lon: r.declared.1,
+                alt_m: r.declared.2,
+                fixes: r.timing.n,
+                bias_s: r.timing.offset_s,
+                var_s2: r.timing.var_s2,
+                late_rate: Some(r.timing.late_rate),
+                late_mean_s: Some(r.timing.late_mean_s),
+                survey: r.survey.snapshot(),
+            })
+            .collect();
+        LearntState { version: crate::mlat::state::VERSION, saved_unix, receivers }
+    }
+
+    /// Takes up what a previous run learnt, for each receiver with the same
+    /// id, clock kind and declared position; returns how many.
+    pub fn restore(&mut self, state: &LearntState) -> usize {
+        let mut restored = 0;
+        for r in &mut self.rxs {
+            if r.timing_known {
+                continue;
+            }
+            let Some(l) = state.receivers.iter().find(|l| l.id == r.id) else { continue };
+            let same_place = geodetic_to_ecef(l.lat, l.lon, l.alt_m);
+            if l.clock != r.clock || ecef_distance(same_place, r.declared_ecef) > 1.0 {
+                continue;
+            }
+            if !(l.bias_s.is_finite() && l.var_s2.is_finite() && l.var_s2 >= 0.0) {
+                continue;
+            }
+            let prior = TimingModel::prior(r.sigma_t);
+            r.timing = TimingModel {
+                n: l.fixes,
+                offset_s: l.bias_s,
+                var_s2: l.var_s2,
+                late_rate: l.late_rate.filter(|v| (0.0..1.0).contains(v)).unwrap_or(prior.late_rate),
+                late_mean_s: l.late_mean_s.filter(|v| v.is_finite() && *v > 0.0).unwrap_or(prior.late_mean_s),
+            };
+            if let Some(s) = Survey::from_snapshot(&l.survey) {
+                r.survey = s;
+            }
+            restored += 1;
+        }
+        for rx in 0..self.rxs.len() {
+            self.sync.set_gps_bias(rx, self.rxs[rx].bias());
+        }
+        restored
+    }
+
+    /// Every receiver's state in one line (`receivers: id=state/sigma/...`).
+    pub fn receivers_line(&self, now: f64, names: &dyn Fn(usize) -> String) -> String {
+        let all: Vec<String> = (0..self.rxs.len())
+            .map(|k| crate::mlat::report::summary(&self.receiver_report(k, now), &names(k)))
+            .collect();
+        format!("mlat receivers (state/sigma/offset/outliers/position): {}", all.join(" "))
+    }
+}
