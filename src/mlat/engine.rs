@@ -26,6 +26,19 @@ use super::baro::{BaroCorrection, GeometricBaros};
 mod placement;
 mod receivers;
 
+/// A group's measurements, one per site (see [`Mlat::measurements`]): each
+/// site's receivers and clock synchronisation variance (s^2, not the
+/// receivers' own), and the sync variance summed over the copies, the share
+/// of it from the aircraft's own ADS-B, and all the copies' variance.
+struct Measured {
+    ms: GroupVec<Measurement>,
+    sites: GroupVec<Site>,
+    sync_vars: GroupVec<f64>,
+    sync_var: f64,
+    self_var: f64,
+    all_var: f64,
+}
+
 /// Height above the ellipsoid (m) of a barometric altitude, and its 1-sigma
 /// (m): corrected by the aircraft's own GNSS-baro difference when it reports
 /// one, or the region's (`baro`), else taken as is with the configured
@@ -594,32 +607,7 @@ impl Mlat {
             self.stats.too_few_receivers += (g.copies.len() < 2) as u64;
             return None;
         }
-        // Usable copies: known receiver, timing. An excluded receiver's are
-        // read (its clock jumps seen) and synchronise it, so that it comes
-        // back once its sync holds; they stay out of the fix.
-        let mut copies: GroupVec<LocalCopy> = GroupVec::new();
-        let mut arrivals: GroupVec<f64> = GroupVec::new();
-        for c in &g.copies {
-            if c.rx >= self.rxs.len() {
-                self.stats.unknown_receiver += 1;
-                continue;
-            }
-            if !crate::feed::has_timing(c.timestamp) {
-                self.stats.no_timing += 1;
-                continue;
-            }
-            let resets = self.sync.health[c.rx].clock_resets;
-            let t = self.local_time(c.rx, c.timestamp, c.arrival);
-            // A counter's jump is its restart; a GPS time's is judged
-            // against the others' (below).
-            if self.rxs[c.rx].clock == ClockKind::Beast12 {
-                let jumped = self.sync.health[c.rx].clock_resets != resets;
-                self.note_jump(c.rx, jumped);
-            }
-            copies.push(LocalCopy { rx: c.rx, t });
-            arrivals.push(c.arrival);
-        }
-        self.drop_gps_time_jumps(&mut copies, &mut arrivals);
+        let (mut copies, mut arrivals) = self.usable_copies(g);
         if copies.len() < 2 {
             self.stats.too_few_receivers += 1;
             return None;
@@ -674,39 +662,8 @@ impl Mlat {
                 }
             }
         }
-        // One measurement per site: receivers closer than the minimum
-        // separation add no geometry, so their times are averaged (inverse
-        // variance) into one measurement with a smaller sigma.
-        let mut ms: GroupVec<Measurement> = GroupVec::new();
-        let mut sites: GroupVec<Site> = GroupVec::new();
-        // Each measurement's clock synchronisation variance (s^2): not the receiver's own.
-        let mut sync_vars: GroupVec<f64> = GroupVec::new();
-        let (mut sync_var, mut self_var, mut all_var) = (0.0, 0.0, 0.0);
-        for (c, t) in copies.iter().zip(&times) {
-            let Some((t, var)) = t else { continue };
-            sync_var += var;
-            self_var += var * self.sync.references[c.rx].share_of(info.addr);
-            all_var += var + self.rxs[c.rx].sigma().powi(2);
-            let rx = &self.rxs[c.rx];
-            // A GPS receiver's offset came off in the common time base.
-            let offset = if rx.clock == ClockKind::Gps { 0.0 } else { rx.bias() };
-            let m = Measurement { pos: rx.ecef, t: *t - offset, sigma_t: (rx.sigma().powi(2) + var).sqrt() };
-            match ms.iter().position(|o| ecef_distance(o.pos, m.pos) < self.cfg.min_separation_m) {
-                Some(k) => {
-                    self.stats.close_receivers += 1;
-                    let (w1, w2) = (1.0 / ms[k].sigma_t.powi(2), 1.0 / m.sigma_t.powi(2));
-                    ms[k].t = (ms[k].t * w1 + m.t * w2) / (w1 + w2);
-                    ms[k].sigma_t = (1.0 / (w1 + w2)).sqrt();
-                    sync_vars[k] = sync_vars[k].min(*var);
-                    sites[k].push(c.rx);
-                }
-                None => {
-                    ms.push(m);
-                    sites.push(smallvec::smallvec![c.rx]);
-                    sync_vars.push(*var);
-                }
-            }
-        }
+        let Measured { mut ms, mut sites, mut sync_vars, sync_var, self_var, all_var } =
+            self.measurements(&copies, &times, info.addr);
         // The barometric altitude's own height and variance (25 ft steps,
         // climb since), apart from its correction to the ellipsoid, when
         // recent enough to constrain the fix.
@@ -830,6 +787,77 @@ impl Mlat {
             self_sync_share,
             df: info.df,
         })
+    }
+
+    /// A group's usable copies on their receivers' local time, with their
+    /// arrivals: known receiver, timing, no GPS time off by seconds.
+    fn usable_copies(&mut self, g: &Group) -> (GroupVec<LocalCopy>, GroupVec<f64>) {
+        // Usable copies: known receiver, timing. An excluded receiver's are
+        // read (its clock jumps seen) and synchronise it, so that it comes
+        // back once its sync holds; they stay out of the fix.
+        let mut copies: GroupVec<LocalCopy> = GroupVec::new();
+        let mut arrivals: GroupVec<f64> = GroupVec::new();
+        for c in &g.copies {
+            if c.rx >= self.rxs.len() {
+                self.stats.unknown_receiver += 1;
+                continue;
+            }
+            if !crate::feed::has_timing(c.timestamp) {
+                self.stats.no_timing += 1;
+                continue;
+            }
+            let resets = self.sync.health[c.rx].clock_resets;
+            let t = self.local_time(c.rx, c.timestamp, c.arrival);
+            // A counter's jump is its restart; a GPS time's is judged
+            // against the others' (below).
+            if self.rxs[c.rx].clock == ClockKind::Beast12 {
+                let jumped = self.sync.health[c.rx].clock_resets != resets;
+                self.note_jump(c.rx, jumped);
+            }
+            copies.push(LocalCopy { rx: c.rx, t });
+            arrivals.push(c.arrival);
+        }
+        self.drop_gps_time_jumps(&mut copies, &mut arrivals);
+        (copies, arrivals)
+    }
+
+    /// The copies' synchronised times as the solver's measurements, one per
+    /// site, with the sync variances the fix's report and calibration need.
+    fn measurements(&mut self, copies: &[LocalCopy], times: &[Option<(f64, f64)>], addr: u32) -> Measured {
+        // One measurement per site: receivers closer than the minimum
+        // separation add no geometry, so their times are averaged (inverse
+        // variance) into one measurement with a smaller sigma.
+        let mut ms: GroupVec<Measurement> = GroupVec::new();
+        let mut sites: GroupVec<Site> = GroupVec::new();
+        // Each measurement's clock synchronisation variance (s^2): not the receiver's own.
+        let mut sync_vars: GroupVec<f64> = GroupVec::new();
+        let (mut sync_var, mut self_var, mut all_var) = (0.0, 0.0, 0.0);
+        for (c, t) in copies.iter().zip(times) {
+            let Some((t, var)) = t else { continue };
+            sync_var += var;
+            self_var += var * self.sync.references[c.rx].share_of(addr);
+            all_var += var + self.rxs[c.rx].sigma().powi(2);
+            let rx = &self.rxs[c.rx];
+            // A GPS receiver's offset came off in the common time base.
+            let offset = if rx.clock == ClockKind::Gps { 0.0 } else { rx.bias() };
+            let m = Measurement { pos: rx.ecef, t: *t - offset, sigma_t: (rx.sigma().powi(2) + var).sqrt() };
+            match ms.iter().position(|o| ecef_distance(o.pos, m.pos) < self.cfg.min_separation_m) {
+                Some(k) => {
+                    self.stats.close_receivers += 1;
+                    let (w1, w2) = (1.0 / ms[k].sigma_t.powi(2), 1.0 / m.sigma_t.powi(2));
+                    ms[k].t = (ms[k].t * w1 + m.t * w2) / (w1 + w2);
+                    ms[k].sigma_t = (1.0 / (w1 + w2)).sqrt();
+                    sync_vars[k] = sync_vars[k].min(*var);
+                    sites[k].push(c.rx);
+                }
+                None => {
+                    ms.push(m);
+                    sites.push(smallvec::smallvec![c.rx]);
+                    sync_vars.push(*var);
+                }
+            }
+        }
+        Measured { ms, sites, sync_vars, sync_var, self_var, all_var }
     }
 
     /// Solves, leaving out each copy that is an outlier under its
