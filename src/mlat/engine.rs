@@ -791,6 +791,8 @@ impl Mlat {
 
     /// A group's usable copies on their receivers' local time, with their
     /// arrivals: known receiver, timing, no GPS time off by seconds.
+    // Inlined: its result, inline vectors, would otherwise be copied out.
+    #[inline(always)]
     fn usable_copies(&mut self, g: &Group) -> (GroupVec<LocalCopy>, GroupVec<f64>) {
         // Usable copies: known receiver, timing. An excluded receiver's are
         // read (its clock jumps seen) and synchronise it, so that it comes
@@ -823,6 +825,8 @@ impl Mlat {
 
     /// The copies' synchronised times as the solver's measurements, one per
     /// site, with the sync variances the fix's report and calibration need.
+    // Inlined: its result, inline vectors, would otherwise be copied out.
+    #[inline(always)]
     fn measurements(&mut self, copies: &[LocalCopy], times: &[Option<(f64, f64)>], addr: u32) -> Measured {
         // One measurement per site: receivers closer than the minimum
         // separation add no geometry, so their times are averaged (inverse
