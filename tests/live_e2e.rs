@@ -642,6 +642,8 @@ fn a_burst_of_frames_in_one_tcp_read_is_processed_whole() {
         // As are multilateration's (one receiver: nothing to fix or drop).
         "fuse1090_mlat_outliers_dropped_total 0",
         "fuse1090_mlat_gps_time_jumps_total 0",
+        "fuse1090_mlat_rejects_total{reason=\"residual\"} 0",
+        "fuse1090_mlat_rejects_total{reason=\"ambiguous\"} 0",
     ] {
         assert!(text.lines().any(|l| l == want), "{want} not in:\n{text}");
     }

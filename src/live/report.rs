@@ -37,6 +37,11 @@ pub(super) fn front_metrics(
     let m = &front.mlat().stats;
     metrics::counter!("fuse1090_mlat_outliers_dropped_total").absolute(m.outliers_dropped);
     metrics::counter!("fuse1090_mlat_gps_time_jumps_total").absolute(m.time_jumps);
+    // Transmissions that gave no fix, per reason (every reason, zeros too,
+    // so that a dashboard has each series from the start).
+    for (why, n) in m.rejects.iter() {
+        metrics::counter!("fuse1090_mlat_rejects_total", "reason" => why.name()).absolute(n);
+    }
     for (rx, (id, h)) in front.mlat_health().enumerate() {
         // MLAT exclusion is a state, not a sentence: an excluded receiver
         // is still synchronised and comes back (gauge 1 while it is out).
