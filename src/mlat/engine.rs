@@ -884,13 +884,14 @@ impl Mlat {
         guess: Option<[f64; 3]>,
     ) -> Result<(super::solver::Fix, Option<Judged>), Reject> {
         let open = SolverLimits { chi2_reject: false, ..self.limits };
+        let anchored = guess.is_some();
         let mut before: Option<super::solver::Fix> = None;
         loop {
             let fix = match solve(ms, alt, guess, &open) {
                 Ok(f) => f,
                 Err(why) => {
                     return before
-                        .map_or(Err(why), |b| self.undrop(ms, sites, sync_vars, dropped, b, guess.is_some()))
+                        .map_or(Err(why), |b| self.undrop(ms, sites, sync_vars, dropped, b, anchored))
                 }
             };
             // Without a copy the equations may have another solution that
@@ -899,14 +900,14 @@ impl Mlat {
             // uncertainty of the one with the copy is not the same fix.
             if let Some(b) = before.take() {
                 if !near(&b, &fix) {
-                    return self.undrop(ms, sites, sync_vars, dropped, b, guess.is_some());
+                    return self.undrop(ms, sites, sync_vars, dropped, b, anchored);
                 }
             }
             if fix.dof < 3 {
-                return self.consistent(fix, sites, guess.is_some()).map(|f| (f, None));
+                return self.consistent(fix, sites, anchored).map(|f| (f, None));
             }
             let Some(at) = AtFix::new(ms, alt, &fix) else {
-                return self.consistent(fix, sites, guess.is_some()).map(|f| (f, None));
+                return self.consistent(fix, sites, anchored).map(|f| (f, None));
             };
             let all = self.verdicts(&at, ms, sites);
             let mut worst: Option<(usize, f64)> = None;
@@ -917,7 +918,7 @@ impl Mlat {
             }
             let Some((k, _)) = worst else {
                 let judged = Judged::new(at, &all, sites);
-                return self.consistent(fix, sites, guess.is_some()).map(|f| (f, Some(judged)));
+                return self.consistent(fix, sites, anchored).map(|f| (f, Some(judged)));
             };
             let (m, site, var) = (ms.remove(k), sites.remove(k), sync_vars.remove(k));
             self.stats.outliers_dropped += 1;

@@ -134,6 +134,19 @@ impl Reject {
     }
 }
 
+/// What a fix's covariance is scaled by: its chi-square per degree of
+/// freedom when the residuals say the sigmas were optimistic (beyond what
+/// chance explains at 1%), else one, so that an honest fix keeps an
+/// unbiased covariance while optimistic sigmas, which exceed it routinely,
+/// do not. The solver scales with it, and the hedge reads it back.
+fn residual_scale(chi2: f64, dof: usize) -> f64 {
+    if dof > 0 && chi2 > chi2_quantile(dof, 0.99) {
+        chi2 / dof as f64
+    } else {
+        1.0
+    }
+}
+
 /// Upper unit normal of the ellipsoid at a point (the gradient of height).
 fn up(lat: f64, lon: f64) -> Vector3<f64> {
     let (sp, cp) = lat.to_radians().sin_cos();
@@ -315,10 +328,7 @@ pub fn solve(
         return Err(Reject::Range);
     }
     let Some(cov4) = scaled_inverse(&nrm.a) else { return Err(Reject::Singular) };
-    // Scale by the residual when it says the sigmas were optimistic (beyond
-    // what chance explains at 1%), so an honest fix keeps an unbiased
-    // covariance while optimistic sigmas, which exceed it routinely, do not.
-    let scale = if dof > 0 && nrm.chi2 > chi2_quantile(dof, 0.99) { nrm.chi2 / dof as f64 } else { 1.0 };
+    let scale = residual_scale(nrm.chi2, dof);
     let cov3: Matrix3<f64> = cov4.fixed_view::<3, 3>(0, 0).into_owned() * scale;
     let mean_sigma_m = {
         let s: f64 = ms.iter().map(|m| 1.0 / (C_AIR * m.sigma_t).powi(2)).sum::<f64>() / ms.len() as f64;
@@ -471,13 +481,6 @@ impl AtFix {
         }
         Some((fix.h_m - h / (1.0 - h) * (alt.h_m - fix.h_m), v / (1.0 - h)))
     }
-
-    /// Every measurement's residual (s, measured minus modelled) and
-    /// leverage: what self-calibration learns receivers' timing from. A
-    /// residual shrinks by `1 - leverage` because the fit absorbs part of it.
-    pub fn residuals(&self) -> Vec<(f64, f64)> {
-        (0..self.rows.len()).map(|k| self.residual(k)).collect()
-    }
 }
 
 /// A fix hedged against copies that may be late without the others being
@@ -497,7 +500,7 @@ impl AtFix {
 /// taken at 0.999.
 pub fn hedge(fix: &Fix, at: &AtFix, p_late: impl Fn(usize) -> f64) -> Fix {
     // The fix's covariance as the solver scaled it.
-    let scale = if at.chi2 > chi2_quantile(fix.dof, 0.99) { at.chi2 / fix.dof as f64 } else { 1.0 };
+    let scale = residual_scale(at.chi2, fix.dof);
     let mut cov = Matrix3::from_fn(|r, c| fix.cov_ecef[r][c]);
     for (k, &(res, j, w, leverage)) in at.rows.iter().enumerate() {
         let pl = p_late(k);
