@@ -142,14 +142,19 @@ fn tma_busy_cut(duration_s: f64, aircraft: usize, mode_s_only: usize, spoofers: 
     s
 }
 
+/// The scenario with no receiver's link delaying frames in bursts.
+fn without_delay_bursts(mut s: Scenario) -> Scenario {
+    for r in &mut s.receiver {
+        r.burst_per_min = 0.0;
+    }
+    s
+}
+
 #[test]
 fn a_misplaced_counter_is_surveyed_and_left_out_and_a_restart_does_not_break_mlat() {
     // 40 aircraft for 150 s, two of them spoofers (2 km and 300 m off: the
     // last two); rx08 restarts at 60 s.
-    let mut s = tma_busy_cut(150.0, 40, 10, 2);
-    for r in &mut s.receiver {
-        r.burst_per_min = 0.0;
-    }
+    let mut s = without_delay_bursts(tma_busy_cut(150.0, 40, 10, 2));
     s.receiver[7].resets_s = vec![60.0];
     let (capture, truth_bytes) = sim(&s);
     let truth = Truth::read(&truth_bytes[..]).unwrap();
@@ -283,10 +288,7 @@ fn late_copies_of_a_delayed_link_are_not_decoded_again() {
 #[test]
 fn a_receiver_whose_timestamps_step_is_resynchronised_and_stays_in_use() {
     use fuse1090::feed::capture::CaptureWriter;
-    let mut s = tma_busy_cut(300.0, 40, 10, 0);
-    for r in &mut s.receiver {
-        r.burst_per_min = 0.0;
-    }
+    let s = without_delay_bursts(tma_busy_cut(300.0, 40, 10, 0));
     let (capture, _) = sim(&s);
     // rx02 (a beast12 counter) steps by 2 s at 60 s.
     let step_at = s.start_unix + 60.0;
@@ -476,10 +478,7 @@ fn self_survey_puts_the_misplaced_receiver_where_it_is_and_learning_nears_the_or
 /// run that leaves it out.
 #[test]
 fn self_survey_moves_a_misplaced_counter_where_it_is() {
-    let mut s = tma_busy_cut(300.0, 40, 10, 0);
-    for r in &mut s.receiver {
-        r.burst_per_min = 0.0;
-    }
+    let s = without_delay_bursts(tma_busy_cut(300.0, 40, 10, 0));
     let (capture, truth_bytes) = sim(&s);
     let truth = Truth::read(&truth_bytes[..]).unwrap();
     let run = |self_survey: bool| {
