@@ -98,7 +98,7 @@ enum Command {
     /// Validate a configuration: exit 0, or print every problem with its location.
     CheckConfig { file: PathBuf },
     /// Print a systemd drop-in that limits the service's sockets and peers
-    /// to those the configuration names (see systemd/README or the README).
+    /// to those the configuration names (see systemd/README and docs/service.md).
     UnitLimits {
         file: PathBuf,
         /// A further address the service may talk to (e.g. a Prometheus server).

@@ -1,6 +1,6 @@
 //! Every fusion method over Monte Carlo runs of the reweighted-convex-
-//! combination benchmark (fusion-8seg-1hz; the full 100-seed table is in the
-//! README, from `fuse1090 eval --scenario ... --seeds 100`). The default
+//! combination benchmark (fusion-8seg-1hz; the full 100-seed table is in
+//! docs/fusion.md, from `fuse1090 eval --scenario ... --seeds 100`). The default
 //! (measurement fusion) must beat both single-source tracks with a NEES
 //! inside a loose band; the published reweighted combination must show its
 //! overconfidence.
@@ -150,7 +150,7 @@ fn the_benchmark_model_set_stays_near_the_papers_figure() {
     let tuned = runs("fusion-8seg-1hz", Some("benchmark-accelerations"), &[Method::Measurement], 1..401);
     let default = runs("fusion-8seg-1hz", None, &[Method::Measurement], 1..401);
     let (t, d) = (row(&tuned, "fused/measurement"), row(&default, "fused/measurement"));
-    // Over these 400 seeds (the README's): 8.93 m against the default's
+    // Over these 400 seeds (docs/fusion.md's): 8.93 m against the default's
     // 9.78 m; tuned for two steps, 9.01 m.
     assert!(t.h_rmse_m < 8.97 && t.h_rmse_m < d.h_rmse_m - 0.6, "{t:?} against {d:?}");
     let (nees, band) = (t.nees.unwrap(), t.nees_band.unwrap());

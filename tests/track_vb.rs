@@ -126,7 +126,7 @@ fn vb_learns_an_overclaimed_nacp() {
     // with positions this coarse and no velocity reports the likelihoods
     // cannot tell the models apart, and in straight flight the manoeuvre
     // models' share widens the covariance (the same flight with its true
-    // noise claimed honestly: 1.6; here 1.38; README, Tracking).
+    // noise claimed honestly: 1.6; here 1.38; docs/tracking.md).
     assert!(1.3 < vb.late && vb.late <= vb.late_band[1], "late NEES {} band {:?}", vb.late, vb.late_band);
     assert!(vb.rmse_m < plain.rmse_m / 2.0, "{} vs {}", vb.rmse_m, plain.rmse_m);
 }

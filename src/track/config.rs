@@ -80,7 +80,7 @@ impl ModelConfig {
 /// flight and their noise went into the estimate. ADS-B aircraft keep
 /// `stay`/`transition`: their positions and velocities tell the models
 /// apart within a second or two, and this matrix's later switching cost
-/// them more than it saved (README, Tracking).
+/// them more than it saved (docs/tracking.md).
 #[derive(Clone, Copy, Debug, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct MlatOnlyConfig {
@@ -141,7 +141,7 @@ pub struct TrackConfig {
     /// both with a prior of 5).
     /// MLAT fixes' covariance is our own geometry's, and their tracks did
     /// worse with the longer memory (fusion-8seg-selfsync's fused NEES 3.25
-    /// -> 4.19; README, Tracking).
+    /// -> 4.19; docs/tracking.md).
     pub vb_forgetting_adsb: f64,
     /// Weight of the prior (nominal noise) in the VB estimate, in
     /// measurements: every track starts with it, and for MLAT fixes it
