@@ -8,7 +8,7 @@ use anyhow::{Context, Result};
 use serde::Deserialize;
 
 use crate::core::CoreConfig;
-use crate::live::config::{InputConfig, OutputConfig, ReceiverConfig, ServiceConfig};
+use crate::live::config::{HttpConfig, InputConfig, OutputConfig, ReceiverConfig, ServiceConfig};
 
 #[derive(Clone, Debug, Default, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields, default)]
@@ -17,6 +17,7 @@ pub struct Config {
     /// Publish per-source (adsb, mlat) tracks beside the fused ones.
     pub publish_source_tracks: bool,
     pub service: ServiceConfig,
+    pub http: HttpConfig,
     /// The live service's receivers, inputs and outputs.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub receiver: Vec<ReceiverConfig>,
@@ -56,6 +57,7 @@ impl Config {
             errs.extend(e.lines().map(|l| format!("[core] {l}")));
         }
         errs.extend(crate::live::config::validate(&self.service, &self.receiver, &self.input, &self.output));
+        errs.extend(self.http.validate());
         if errs.is_empty() {
             Ok(self)
         } else {

@@ -124,6 +124,7 @@ fn the_daemon_makes_no_call_the_units_filter_refuses() {
     let (metrics, input) = (common::free_port(), common::free_port());
     let sink = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     let demo = std::fs::read_to_string(root.join("config/demo.toml")).unwrap();
+    let demo = demo.replace("127.0.0.1:8090", &format!("127.0.0.1:{}", common::free_port()));
     let cfg = demo.replacen(
         "[service]\n",
         &format!(

@@ -43,7 +43,7 @@ pub fn limits(cfg: &Config, allow: &[IpAddr], name: &str) -> String {
             InputKind::BeastTcpClient => false,
         };
     }
-    if let Some(a) = cfg.service.metrics_listen {
+    for a in cfg.service.metrics_listen.iter().chain(&cfg.http.listen) {
         binds.insert(format!("tcp:{}", a.port()));
     }
     for b in &binds {
@@ -92,10 +92,11 @@ fn peers(cfg: &Config, allow: &[IpAddr]) -> Result<BTreeSet<IpAddr>, String> {
             addrs.insert(a.ip());
         }
     }
-    if let Some(a) = cfg.service.metrics_listen {
-        if !a.ip().is_loopback() && allow.is_empty() {
+    let servers = [("metrics", cfg.service.metrics_listen), ("HTTP", cfg.http.listen)];
+    for (what, at) in servers {
+        if let Some(a) = at.filter(|a| !a.ip().is_loopback() && allow.is_empty()) {
             return Err(format!(
-                "metrics on {a} answer scrapers this file cannot name (add them with --allow)"
+                "{what} on {a} answers clients this file cannot name (add them with --allow)"
             ));
         }
     }
@@ -110,7 +111,10 @@ mod tests {
     fn the_demo_is_limited_to_its_port_and_loopback() {
         let demo = Config::load(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/config/demo.toml"))).unwrap();
         let text = limits(&demo, &[], "demo.toml");
-        assert!(text.contains("SocketBindAllow=tcp:30104\nSocketBindDeny=any\n"), "{text}");
+        assert!(
+            text.contains("SocketBindAllow=tcp:30104\nSocketBindAllow=tcp:8090\nSocketBindDeny=any\n"),
+            "{text}"
+        );
         assert!(text.ends_with("IPAddressAllow=localhost\nIPAddressDeny=any\n"), "{text}");
     }
 

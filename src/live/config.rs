@@ -73,6 +73,37 @@ impl Default for ServiceConfig {
     }
 }
 
+/// `[http]`: the map's data, readsb-compatible JSON and `/metrics` on one port.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HttpConfig {
+    /// Where to listen (host:port). Absent: off.
+    #[serde(deserialize_with = "off_if_empty", skip_serializing_if = "Option::is_none")]
+    pub listen: Option<SocketAddr>,
+    /// Connections served at once; more are closed at accept and counted.
+    pub max_connections: usize,
+}
+
+impl Default for HttpConfig {
+    fn default() -> Self {
+        // A browser holds a few connections; a hundred viewers fit.
+        HttpConfig { listen: None, max_connections: 256 }
+    }
+}
+
+impl HttpConfig {
+    pub fn validate(&self) -> Vec<String> {
+        let mut errs = Vec::new();
+        if self.listen.is_some_and(|a| a.port() == 0) {
+            errs.push("[http] listen: port 0 is no port".into());
+        }
+        if !(1..=10_000).contains(&self.max_connections) {
+            errs.push(format!("[http] max_connections = {} must be in 1..=10000", self.max_connections));
+        }
+        errs
+    }
+}
+
 /// What can be off is off when absent; an empty string, which earlier
 /// configurations wrote for it, is read as absent too.
 fn off_if_empty<'de, D, T>(d: D) -> Result<Option<T>, D::Error>

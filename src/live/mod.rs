@@ -14,9 +14,9 @@
 
 pub mod admit;
 pub mod config;
+pub mod http;
 pub mod inputs;
 pub mod loglimit;
-pub mod metrics_http;
 pub mod outputs;
 pub mod record;
 pub mod registry;
@@ -24,6 +24,7 @@ pub mod replay;
 mod report;
 pub mod server;
 pub mod stamp;
+pub mod web;
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering;
@@ -148,18 +149,7 @@ fn realtime(priority: u8) -> std::io::Result<()> {
 
 async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
     let registry = Arc::new(Registry { queue_frames: cfg.service.queue_frames, ..Default::default() });
-    let mut metrics_task = None;
-    if let Some(addr) = cfg.service.metrics_listen {
-        let listener = tokio::net::TcpListener::bind(addr)
-            .await
-            .with_context(|| format!("the Prometheus endpoint cannot bind {addr}"))?;
-        let handle = metrics_exporter_prometheus::PrometheusBuilder::new()
-            .install_recorder()
-            .context("cannot start the Prometheus recorder")?;
-        metrics_task =
-            Some(tokio::spawn(metrics_http::serve(listener, handle, registry.metrics_http.clone())));
-        tracing::info!(address = %addr, "Prometheus metrics");
-    }
+    let (http_tasks, web) = start_http(&cfg, &registry).await?;
     // Every message holds a frame or more: the frames' bound bites first.
     let (tx, rx) = sync_channel::<ToCore>(cfg.service.queue_frames);
     let mut core_cfg = cfg.core.clone();
@@ -191,9 +181,9 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
     // daemon, a stale instance) fails the start, where systemd shows it.
     let bound = inputs::bind_all(&cfg.input).await.map_err(anyhow::Error::msg)?;
     let reg = registry.clone();
-    let core_thread = std::thread::Builder::new()
-        .name("core".into())
-        .spawn(move || core_loop(core_cfg, decls, outputs, recorder, rx, reg, (stats_every, state_file)))?;
+    let core_thread = std::thread::Builder::new().name("core".into()).spawn(move || {
+        core_loop(core_cfg, decls, outputs, recorder, rx, reg, Extras { stats_every, state_file, web })
+    })?;
 
     let spawn_all = |list: &[InputConfig], bound: Vec<inputs::Bound>| -> Vec<tokio::task::JoinHandle<()>> {
         list.iter()
@@ -253,7 +243,7 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
         }
     }
     tracing::info!("stopping");
-    for t in tasks.into_iter().chain(metrics_task).chain(demo_task) {
+    for t in tasks.into_iter().chain(http_tasks).chain(demo_task) {
         t.abort();
     }
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
@@ -261,6 +251,49 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
     drop(tx);
     let _ = tokio::task::spawn_blocking(move || core_thread.join()).await;
     Ok(())
+}
+
+/// The Prometheus endpoint and the HTTP server, each bound before anything
+/// runs (a taken port fails the start); the documents the HTTP server hands
+/// out, for the tracker thread to render, when it is on.
+async fn start_http(
+    cfg: &Config,
+    registry: &Arc<Registry>,
+) -> Result<(Vec<tokio::task::JoinHandle<()>>, Option<Arc<web::WebData>>)> {
+    let (metrics_at, http_at) = (cfg.service.metrics_listen, cfg.http.listen);
+    let mut tasks = Vec::new();
+    if metrics_at.is_none() && http_at.is_none() {
+        return Ok((tasks, None));
+    }
+    let handle = metrics_exporter_prometheus::PrometheusBuilder::new()
+        .install_recorder()
+        .context("cannot start the Prometheus recorder")?;
+    if let Some(addr) = metrics_at {
+        let listener = tokio::net::TcpListener::bind(addr)
+            .await
+            .with_context(|| format!("the Prometheus endpoint cannot bind {addr}"))?;
+        let routes = http::Routes { metrics: Some(handle.clone()), web: None };
+        let counters = registry.metrics_http.clone();
+        tasks.push(tokio::spawn(http::serve(listener, routes, counters, http::METRICS_CONNECTIONS)));
+        tracing::info!(address = %addr, "Prometheus metrics");
+    }
+    let Some(addr) = http_at else { return Ok((tasks, None)) };
+    let listener = tokio::net::TcpListener::bind(addr)
+        .await
+        .with_context(|| format!("the HTTP server ([http] listen) cannot bind {addr}"))?;
+    let data = Arc::new(web::WebData::default());
+    let routes = http::Routes { metrics: Some(handle), web: Some(data.clone()) };
+    tasks.push(tokio::spawn(http::serve(listener, routes, registry.http.clone(), cfg.http.max_connections)));
+    tracing::info!(address = %addr, "HTTP: /data/aircraft.json, /data/receivers.json, /metrics");
+    Ok((tasks, Some(data)))
+}
+
+/// The core thread's settings beyond its configuration.
+struct Extras {
+    stats_every: f64,
+    state_file: Option<PathBuf>,
+    /// The HTTP server's documents, rendered by the tracker thread.
+    web: Option<Arc<web::WebData>>,
 }
 
 /// Applies a re-read configuration (SIGHUP): receivers added, updated and
@@ -282,6 +315,11 @@ async fn reload(
     }
     // Logged once the receivers are in place (tests wait for it).
     tracing::info!("SIGHUP: configuration re-read");
+    // Their ports are bound once, at start.
+    if new.http.listen != current.http.listen || new.service.metrics_listen != current.service.metrics_listen
+    {
+        tracing::warn!("SIGHUP: [http] listen and metrics_listen take effect at the next start");
+    }
     let _ = tx.send(ToCore::Outputs(Outputs::new(&new.output, &new.service)));
     if new.input == current.input {
         return 0;
@@ -332,7 +370,7 @@ fn core_loop(
     mut recorder: Option<Recorder>,
     rx: Receiver<ToCore>,
     registry: Arc<Registry>,
-    (stats_every, state_file): (f64, Option<PathBuf>),
+    Extras { stats_every, state_file, web }: Extras,
 ) {
     let (mut front, back) = Core::stages(&cfg);
     let mut cmds = Vec::new();
@@ -357,7 +395,7 @@ fn core_loop(
     let back_registry = registry.clone();
     let back_thread = match std::thread::Builder::new()
         .name("tracker".into())
-        .spawn(move || back_loop(back, outputs, from_front, back_registry, stats_every))
+        .spawn(move || back_loop(back, outputs, from_front, back_registry, (stats_every, web)))
     {
         Ok(h) => h,
         Err(e) => {
@@ -480,9 +518,10 @@ fn back_loop(
     mut outputs: Outputs,
     rx: Receiver<ToBack>,
     registry: Arc<Registry>,
-    stats_every: f64,
+    (stats_every, web): (f64, Option<Arc<web::WebData>>),
 ) {
     let mut events: Vec<Event> = Vec::new();
+    let mut web = web.map(web::WebPublisher::new);
     let mut front = report::FrontSnapshot::default();
     let mut next_metrics = 0.0;
     let mut next_stats = unix_now() + stats_every;
@@ -502,6 +541,10 @@ fn back_loop(
         };
         back.apply(cmds, &mut events);
         outputs.publish(&events, |i| back.receiver_id(i), now);
+        if let Some(w) = &mut web {
+            w.observe(&events, now);
+            w.maybe_render(now, front.stats.messages, &registry);
+        }
         events.clear();
         if now >= next_stats {
             report::stats_line(

@@ -66,8 +66,10 @@ pub struct Registry {
     /// Datagrams the kernel dropped on the UDP inputs' sockets, their
     /// buffers full (`SO_RXQ_OVFL`): lost before any receiver could be named.
     pub kernel_drops: AtomicU64,
-    /// What the Prometheus endpoint turned away.
-    pub metrics_http: Arc<super::metrics_http::HttpCounters>,
+    /// What the Prometheus endpoint (`metrics_listen`) turned away.
+    pub metrics_http: Arc<super::http::HttpCounters>,
+    /// What the HTTP server (`[http] listen`) turned away.
+    pub http: Arc<super::http::HttpCounters>,
 }
 
 /// A receiver and new counters, its rate limit set.

@@ -170,12 +170,16 @@ pub(super) fn metrics(front: &FrontSnapshot, back: &Back, reg: &Registry, output
     metrics::counter!("fuse1090_unknown_senders_total").absolute(reg.unknown_senders.load(Ordering::Relaxed));
     metrics::counter!("fuse1090_socket_errors_total").absolute(reg.socket_errors.load(Ordering::Relaxed));
     metrics::counter!("fuse1090_queue_drops_total").absolute(reg.queue_drops.load(Ordering::Relaxed));
-    let http = &reg.metrics_http;
-    metrics::counter!("fuse1090_metrics_http_refused_total").absolute(http.refused.load(Ordering::Relaxed));
-    metrics::counter!("fuse1090_metrics_http_timed_out_total")
-        .absolute(http.timed_out.load(Ordering::Relaxed));
-    metrics::counter!("fuse1090_metrics_http_accept_errors_total")
-        .absolute(http.accept_errors.load(Ordering::Relaxed));
+    for (name, http) in [("metrics_http", &reg.metrics_http), ("http", &reg.http)] {
+        let counts = [
+            ("refused", &http.refused),
+            ("timed_out", &http.timed_out),
+            ("accept_errors", &http.accept_errors),
+        ];
+        for (what, n) in counts {
+            metrics::counter!(format!("fuse1090_{name}_{what}_total")).absolute(n.load(Ordering::Relaxed));
+        }
+    }
     // Datagrams lost in the kernel, the UDP inputs' buffers full.
     metrics::counter!("fuse1090_udp_kernel_drops_total").absolute(reg.kernel_drops.load(Ordering::Relaxed));
     // Frames waiting for the core: it fills before anything is dropped.

@@ -131,7 +131,8 @@ pub fn receiver_counts(log: &Path, id: &str) -> [u64; 5] {
 
 /// The demo configuration (eight GPS-timed receivers replaying the surface
 /// capture into its Beast TCP server) with its server on `port`, the replay
-/// at `speed`, stats every half second and one JSON output of `output`'s kind.
+/// at `speed`, stats every half second, its HTTP server on a free port and
+/// one JSON output of `output`'s kind.
 pub fn demo(port: u16, speed: f64, output: &str) -> String {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let text = std::fs::read_to_string(root.join("config/demo.toml")).unwrap();
@@ -140,5 +141,6 @@ pub fn demo(port: u16, speed: f64, output: &str) -> String {
         .replace("fixtures/", &format!("{}/fixtures/", root.display()))
         .replace("demo_speed = 1.0", &format!("demo_speed = {speed}"))
         .replace("stats_interval_s = 10.0", "stats_interval_s = 0.5")
+        .replace("127.0.0.1:8090", &format!("127.0.0.1:{}", super::free_port()))
         + &format!("[[output]]\nformat = \"json\"\n{output}")
 }
