@@ -14,8 +14,8 @@ use serde::Serialize;
 
 use super::inputs::Registry;
 use crate::core::Event;
-use crate::mlat::ReceiverReport;
 use crate::publish::aircraft_json::AircraftView;
+use crate::publish::json::round;
 
 /// How often the documents are rendered (ms): readsb's `refresh`, which
 /// tar1090 polls at.
@@ -39,22 +39,20 @@ pub enum Document {
 }
 
 impl WebData {
-    pub fn get(&self, d: Document) -> Bytes {
-        let slot = match d {
+    fn slot(&self, d: Document) -> &Mutex<Bytes> {
+        match d {
             Document::Aircraft => &self.aircraft,
             Document::Receivers => &self.receivers,
             Document::Receiver => &self.receiver,
-        };
-        slot.lock().map(|b| b.clone()).unwrap_or_default()
+        }
+    }
+
+    pub fn get(&self, d: Document) -> Bytes {
+        self.slot(d).lock().map(|b| b.clone()).unwrap_or_default()
     }
 
     fn set(&self, d: Document, bytes: Vec<u8>) {
-        let slot = match d {
-            Document::Aircraft => &self.aircraft,
-            Document::Receivers => &self.receivers,
-            Document::Receiver => &self.receiver,
-        };
-        if let Ok(mut b) = slot.lock() {
+        if let Ok(mut b) = self.slot(d).lock() {
             *b = Bytes::from(bytes);
         }
     }
@@ -64,8 +62,10 @@ impl WebData {
 pub struct WebPublisher {
     data: Arc<WebData>,
     view: AircraftView,
-    /// The newest learnt-state report of each receiver, by index.
-    reports: Vec<Option<ReceiverReport>>,
+    /// The newest `receiver` record of each receiver, by index, as the
+    /// track stream writes it (less its `type` and `id`): rendered when it
+    /// is published, once a minute, not at every refresh.
+    reports: Vec<Option<serde_json::Value>>,
     /// Frames counted per receiver at the last render, for the rate.
     last_frames: Vec<u64>,
     last_render: f64,
@@ -101,7 +101,7 @@ struct ReceiverEntry<'a> {
     revoked: bool,
     /// The `receiver` record of the track stream, when one was published.
     #[serde(skip_serializing_if = "Option::is_none")]
-    mlat: Option<serde_json::Value>,
+    mlat: Option<&'a serde_json::Value>,
 }
 
 impl WebPublisher {
@@ -123,7 +123,7 @@ impl WebPublisher {
                 if self.reports.len() <= r.rx {
                     self.reports.resize(r.rx + 1, None);
                 }
-                self.reports[r.rx] = Some((**r).clone());
+                self.reports[r.rx] = Some(receiver_record(ev));
             }
         }
     }
@@ -143,7 +143,7 @@ impl WebPublisher {
     }
 
     fn render_receivers(&mut self, now: f64, dt: f64, registry: &Registry) -> (Vec<u8>, Vec<u8>) {
-        let list = registry.receivers.read().map(|l| l.clone()).unwrap_or_default();
+        let Ok(list) = registry.receivers.read() else { return Default::default() };
         self.last_frames.resize(list.len(), 0);
         let mut entries = Vec::with_capacity(list.len());
         let (mut lat, mut lon, mut n) = (0.0, 0.0, 0usize);
@@ -159,18 +159,6 @@ impl WebPublisher {
             if !revoked {
                 (lat, lon, n) = (lat + cfg.lat, lon + cfg.lon, n + 1);
             }
-            let mlat = self.reports.get(i).and_then(Option::as_ref).map(|r| {
-                let mut line = Vec::new();
-                crate::publish::json::write_event(&mut line, &Event::Receiver(Box::new(r.clone())), |_| {
-                    &cfg.id
-                });
-                let mut v: serde_json::Value = serde_json::from_slice(&line).unwrap_or_default();
-                if let Some(o) = v.as_object_mut() {
-                    o.remove("type");
-                    o.remove("id");
-                }
-                v
-            });
             entries.push(ReceiverEntry {
                 id: &cfg.id,
                 lat: cfg.lat,
@@ -178,13 +166,12 @@ impl WebPublisher {
                 alt_m: cfg.alt_m,
                 clock: cfg.clock.name(),
                 frames,
-                frames_per_s: (rate * 10.0).round() / 10.0,
+                frames_per_s: round(rate, 10.0),
                 revoked,
-                mlat,
+                mlat: self.reports.get(i).and_then(Option::as_ref),
             });
         }
-        let receivers =
-            serde_json::to_vec(&ReceiversDoc { now: (now * 10.0).round() / 10.0, receivers: entries });
+        let receivers = serde_json::to_vec(&ReceiversDoc { now: round(now, 10.0), receivers: entries });
         // The network's centre: where tar1090 centres its map and measures
         // distances from (readsb gives its one receiver's position).
         let centre = (n > 0).then(|| (lat / n as f64, lon / n as f64));
@@ -192,13 +179,52 @@ impl WebPublisher {
             version: format!("fuse1090 {}", env!("CARGO_PKG_VERSION")),
             refresh: REFRESH_MS,
             history: 0,
-            lat: centre.map(|c| (c.0 * 1e6).round() / 1e6),
-            lon: centre.map(|c| (c.1 * 1e6).round() / 1e6),
+            lat: centre.map(|c| round(c.0, 1e6)),
+            lon: centre.map(|c| round(c.1, 1e6)),
         });
         (receivers.unwrap_or_default(), receiver.unwrap_or_default())
     }
+}
 
-    pub fn aircraft(&self) -> usize {
-        self.view.len()
+/// A `receiver` event as the track stream writes it, without the `type` and
+/// `id` that `receivers.json` has around it.
+fn receiver_record(ev: &Event) -> serde_json::Value {
+    let mut line = Vec::new();
+    crate::publish::json::write_event(&mut line, ev, |_| "");
+    let mut v: serde_json::Value = serde_json::from_slice(&line).unwrap_or_default();
+    if let Some(o) = v.as_object_mut() {
+        o.remove("type");
+        o.remove("id");
+    }
+    v
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mlat::report::{ReceiverReport, RxState};
+
+    #[test]
+    fn a_receivers_learnt_timing_is_kept_as_the_track_stream_writes_it() {
+        let mut web = WebPublisher::new(Arc::default());
+        let report = ReceiverReport {
+            t: 5.0,
+            rx: 2,
+            state: RxState::Ok,
+            reason: None,
+            sigma_ns: Some(42.04),
+            offset_ns: None,
+            outlier_rate: Some(0.01),
+            late_delay_ns: None,
+            position_offset_en_m: None,
+            position_offset_sigma_m: None,
+        };
+        web.observe(&[Event::Receiver(Box::new(report))], 5.0);
+        assert!(web.reports[..2].iter().all(Option::is_none));
+        let kept = web.reports[2].as_ref().unwrap();
+        assert_eq!(
+            kept,
+            &serde_json::json!({"t": 5.0, "state": "ok", "sigma_ns": 42.0, "outlier_rate": 0.01})
+        );
     }
 }

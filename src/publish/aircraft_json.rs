@@ -22,6 +22,7 @@ use serde::Serialize;
 
 use crate::core::Event;
 use crate::fuse::{Alert, TrackReport};
+use crate::publish::json::round;
 
 /// An aircraft leaves the view this long (s) after its fused track's last
 /// publication: a track that stopped being published has ended.
@@ -260,10 +261,6 @@ fn h95(c: [[f64; 2]; 2]) -> f64 {
     let big = 0.5 * (a + d) + (0.25 * (a - d).powi(2) + b * b).sqrt();
     // 2-D chi-square 95% quantile: 5.991.
     (5.991 * big.max(0.0)).sqrt()
-}
-
-fn round(v: f64, k: f64) -> f64 {
-    (v * k).round() / k
 }
 
 #[cfg(test)]

@@ -295,7 +295,8 @@ pub fn alert_record(a: &Alert) -> serde_json::Value {
     }
 }
 
-fn round(v: f64, k: f64) -> f64 {
+/// `v` rounded to a multiple of `1 / k`: what a published number can mean.
+pub(crate) fn round(v: f64, k: f64) -> f64 {
     (v * k).round() / k
 }
 
