@@ -179,9 +179,11 @@ impl AircraftView {
         }
     }
 
-    /// Forgets aircraft whose track has not been published for [`TRACK_TTL_S`].
+    /// Forgets aircraft whose track has not been published for [`TRACK_TTL_S`]
+    /// (by the newest estimate's time: ADS-B reports or fixes that no
+    /// longer reach a track must not keep its last position on show).
     pub fn expire(&mut self, now: f64) {
-        self.aircraft.retain(|_, e| now - e.seen <= TRACK_TTL_S);
+        self.aircraft.retain(|_, e| now - e.track.est.t <= TRACK_TTL_S);
     }
 
     pub fn len(&self) -> usize {
@@ -414,6 +416,31 @@ mod tests {
         view.observe(&[Event::Track(Box::new(report(2, 50.0, &["adsb"])))], 50.0);
         view.expire(TRACK_TTL_S + 1.0);
         assert_eq!(view.len(), 1, "aircraft 1, not published for longer than the TTL, is gone");
+    }
+
+    #[test]
+    fn reports_that_reach_no_track_do_not_keep_an_aircraft() {
+        let mut view = AircraftView::new();
+        view.observe(&[Event::Track(Box::new(report(1, 0.0, &["adsb"])))], 0.0);
+        let p = |t| crate::core::PositionReport {
+            addr: 1,
+            t,
+            lat: 43.5,
+            lon: 1.25,
+            alt_m: None,
+            alt_baro_ft: None,
+            alt_sigma_m: None,
+            nac_p: None,
+            sigma_m: None,
+            dating: crate::core::Dating::Arrival,
+            surface: false,
+            rx: 0,
+        };
+        for t in 1..=70 {
+            view.observe(&[Event::Position(p(t as f64))], t as f64);
+        }
+        view.expire(70.0);
+        assert!(view.is_empty(), "a track last published 70 s ago is gone, its reports still coming or not");
     }
 
     #[test]
