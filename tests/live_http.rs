@@ -54,6 +54,15 @@ fn with_http(text: &str, port: u16, extra: &str) -> String {
     format!("{head}[http]\nlisten = \"127.0.0.1:{port}\"\n{extra}{rest}")
 }
 
+/// `fuse1090_http_refused_total` in a scrape (0 when absent).
+fn refused_count(metrics: &str) -> f64 {
+    metrics
+        .lines()
+        .find_map(|l| l.strip_prefix("fuse1090_http_refused_total "))
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or(0.0)
+}
+
 #[test]
 fn the_demo_serves_its_fused_tracks_as_readsb_json() {
     let sink = UdpSocket::bind("127.0.0.1:0").unwrap();
@@ -147,22 +156,12 @@ fn receivers_metrics_and_bad_clients() {
         assert!(t0.elapsed() < Duration::from_secs(15), "never served again after the idle flood");
         std::thread::sleep(Duration::from_millis(200));
     };
-    let refused = metrics
-        .lines()
-        .find_map(|l| l.strip_prefix("fuse1090_http_refused_total "))
-        .and_then(|v| v.trim().parse::<f64>().ok())
-        .unwrap_or(0.0);
     // Counted once a second: wait for the count to include the flood.
-    let refused = if refused > 0.0 {
-        refused
-    } else {
+    let mut refused = refused_count(&metrics);
+    if refused == 0.0 {
         std::thread::sleep(Duration::from_millis(1200));
-        let (_, body) = get(http, b"GET /metrics HTTP/1.0\r\n\r\n");
-        body.lines()
-            .find_map(|l| l.strip_prefix("fuse1090_http_refused_total "))
-            .and_then(|v| v.trim().parse::<f64>().ok())
-            .unwrap_or(0.0)
-    };
+        refused = refused_count(&get(http, b"GET /metrics HTTP/1.0\r\n\r\n").1);
+    }
     assert!(refused >= 30.0, "refused {refused}:\n{metrics}");
     drop(idle);
     signal(&child, "TERM");
