@@ -306,6 +306,24 @@ mod tests {
         }
     }
 
+    /// A decoded ADS-B position of `addr` at `t`.
+    fn position(addr: u32, t: f64, surface: bool) -> crate::core::PositionReport {
+        crate::core::PositionReport {
+            addr,
+            t,
+            lat: 43.5,
+            lon: 1.25,
+            alt_m: None,
+            alt_baro_ft: None,
+            alt_sigma_m: None,
+            nac_p: None,
+            sigma_m: None,
+            dating: crate::core::Dating::Arrival,
+            surface,
+            rx: 0,
+        }
+    }
+
     fn rendered(view: &AircraftView, now: f64) -> Value {
         serde_json::from_slice(&view.render(now, 42)).unwrap()
     }
@@ -375,21 +393,7 @@ mod tests {
         view.observe(&[Event::Track(Box::new(adsb_only))], 10.0);
         assert!(view.is_empty(), "the fused track is the aircraft's; per-source ones are not");
         view.observe(&[Event::Track(Box::new(report(2, 10.0, &["adsb"])))], 10.0);
-        let p = crate::core::PositionReport {
-            addr: 2,
-            t: 10.0,
-            lat: 43.5,
-            lon: 1.25,
-            alt_m: None,
-            alt_baro_ft: None,
-            alt_sigma_m: None,
-            nac_p: None,
-            sigma_m: None,
-            dating: crate::core::Dating::Arrival,
-            surface: true,
-            rx: 0,
-        };
-        view.observe(&[Event::Position(p)], 10.2);
+        view.observe(&[Event::Position(position(2, 10.0, true))], 10.2);
         assert_eq!(rendered(&view, 10.5)["aircraft"][0]["alt_baro"], "ground");
     }
 
@@ -422,22 +426,8 @@ mod tests {
     fn reports_that_reach_no_track_do_not_keep_an_aircraft() {
         let mut view = AircraftView::new();
         view.observe(&[Event::Track(Box::new(report(1, 0.0, &["adsb"])))], 0.0);
-        let p = |t| crate::core::PositionReport {
-            addr: 1,
-            t,
-            lat: 43.5,
-            lon: 1.25,
-            alt_m: None,
-            alt_baro_ft: None,
-            alt_sigma_m: None,
-            nac_p: None,
-            sigma_m: None,
-            dating: crate::core::Dating::Arrival,
-            surface: false,
-            rx: 0,
-        };
         for t in 1..=70 {
-            view.observe(&[Event::Position(p(t as f64))], t as f64);
+            view.observe(&[Event::Position(position(1, t as f64, false))], t as f64);
         }
         view.expire(70.0);
         assert!(view.is_empty(), "a track last published 70 s ago is gone, its reports still coming or not");
