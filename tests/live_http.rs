@@ -11,7 +11,7 @@ use std::io::{Read, Write};
 use std::net::{TcpStream, UdpSocket};
 use std::time::{Duration, Instant};
 
-use common::live::{daemon, demo, exit_within, signal, wait_for_log};
+use common::live::{daemon, demo, exit_within, signal, wait_for_log, with_http};
 use serde_json::Value;
 
 /// A plain HTTP/1.0 request; the status code and the body.
@@ -47,13 +47,6 @@ fn start(name: &str, http: u16, sink: &UdpSocket, extra: &str) -> (tempfile::Tem
     (work, child)
 }
 
-/// The demo's `[http]` table with `listen` on `port`, and `extra` in it.
-fn with_http(text: &str, port: u16, extra: &str) -> String {
-    let (head, tail) = text.split_once("[http]\nlisten = \"").expect("the demo serves HTTP");
-    let (_, rest) = tail.split_once('"').unwrap();
-    format!("{head}[http]\nlisten = \"127.0.0.1:{port}\"\n{extra}{rest}")
-}
-
 /// `fuse1090_http_refused_total` in a scrape (0 when absent).
 fn refused_count(metrics: &str) -> f64 {
     metrics
@@ -83,6 +76,13 @@ fn the_demo_serves_its_fused_tracks_as_readsb_json() {
         }
     }
     let (doc, asked) = (document(http, "/data/aircraft.json"), Instant::now());
+    // The map's page and the files it loads are served beside the data.
+    let (status, page) = get(http, b"GET / HTTP/1.0\r\n\r\n");
+    assert!(status == 200 && page.contains("<script src=\"app.js\">"), "{status}: {page}");
+    for file in ["/app.js", "/leaflet.js", "/style.css", "/leaflet.css", "/world.json"] {
+        let (status, body) = get(http, format!("GET {file} HTTP/1.0\r\n\r\n").as_bytes());
+        assert!(status == 200 && body.len() > 1000, "{file}: {status}");
+    }
     signal(&child, "TERM");
     assert!(exit_within(&mut child, Duration::from_secs(5)).is_some());
     let served: BTreeMap<String, u64> = doc["aircraft"]

@@ -82,12 +82,21 @@ pub struct HttpConfig {
     pub listen: Option<SocketAddr>,
     /// Connections served at once; more are closed at accept and counted.
     pub max_connections: usize,
+    /// A tile server for the map's background, as a URL template with
+    /// `{z}`, `{x}` and `{y}` (and optionally `{s}`). Absent: the map draws
+    /// the coastlines and borders it carries, and needs no network.
+    #[serde(deserialize_with = "off_if_empty", skip_serializing_if = "Option::is_none")]
+    pub map_tiles: Option<String>,
+    /// The tiles' attribution, shown in the map's corner (most tile
+    /// providers require one).
+    #[serde(deserialize_with = "off_if_empty", skip_serializing_if = "Option::is_none")]
+    pub map_attribution: Option<String>,
 }
 
 impl Default for HttpConfig {
     fn default() -> Self {
         // A browser holds a few connections; a hundred viewers fit.
-        HttpConfig { listen: None, max_connections: 256 }
+        HttpConfig { listen: None, max_connections: 256, map_tiles: None, map_attribution: None }
     }
 }
 
@@ -99,6 +108,11 @@ impl HttpConfig {
         }
         if !(1..=10_000).contains(&self.max_connections) {
             errs.push(format!("[http] max_connections = {} must be in 1..=10000", self.max_connections));
+        }
+        if let Some(url) = &self.map_tiles {
+            if !["{z}", "{x}", "{y}"].iter().all(|p| url.contains(p)) {
+                errs.push(format!("[http] map_tiles = {url:?} must contain {{z}}, {{x}} and {{y}}"));
+            }
         }
         errs
     }
@@ -452,4 +466,18 @@ pub fn validate(
         }
     }
     errs
+}
+
+#[cfg(test)]
+mod tests {
+    use super::HttpConfig;
+
+    #[test]
+    fn a_tile_url_must_name_the_tile() {
+        let with = |url: &str| HttpConfig { map_tiles: Some(url.into()), ..HttpConfig::default() }.validate();
+        assert!(with("https://tiles.example/{z}/{x}/{y}.png").is_empty());
+        let errs = with("https://tiles.example/{z}/{x}.png");
+        assert_eq!(errs.len(), 1, "{errs:?}");
+        assert!(errs[0].contains("map_tiles") && errs[0].contains("{y}"), "{errs:?}");
+    }
 }

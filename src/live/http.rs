@@ -1,6 +1,8 @@
-//! The service's HTTP: `[http] listen` serves the map's data under
-//! `/data/` (readsb's `aircraft.json` and `receiver.json`, fuse1090's
-//! `receivers.json`, see [`super::web`]) and `/metrics`; `[service]
+//! The service's HTTP: `[http] listen` serves the live map at `/` (its
+//! files embedded, see [`super::map_assets`]), its data under `/data/`
+//! (readsb's `aircraft.json` and `receiver.json`, fuse1090's
+//! `receivers.json` and the map's `map.json`, see [`super::web`]) and
+//! `/metrics`; `[service]
 //! metrics_listen` serves `/metrics` alone. Both over hyper, by the same code.
 //!
 //! Bounded, because anyone who reaches the port can open connections: at
@@ -24,6 +26,7 @@ use hyper_util::rt::{TokioIo, TokioTimer};
 use metrics_exporter_prometheus::PrometheusHandle;
 use tokio::net::TcpListener;
 
+use super::map_assets;
 use super::web::{Document, WebData};
 
 /// Connections the Prometheus endpoint serves at once.
@@ -61,8 +64,9 @@ async fn answer(req: Request<Incoming>, routes: Arc<Routes>) -> Result<Response<
         (&Method::GET, "/data/aircraft.json") => document(Document::Aircraft),
         (&Method::GET, "/data/receivers.json") => document(Document::Receivers),
         (&Method::GET, "/data/receiver.json") => document(Document::Receiver),
-        (&Method::GET, "/") if routes.web.is_some() => {
-            Some((StatusCode::OK, TEXT, Bytes::from_static(INDEX)))
+        (&Method::GET, "/data/map.json") => document(Document::Map),
+        (&Method::GET, path) if routes.web.is_some() => {
+            map_assets::find(path).map(|a| (StatusCode::OK, a.content_type, Bytes::from_static(a.bytes)))
         }
         (&Method::GET, _) => None,
         _ => Some((StatusCode::METHOD_NOT_ALLOWED, TEXT, Bytes::from_static(b"GET only\n"))),
@@ -77,12 +81,6 @@ async fn answer(req: Request<Incoming>, routes: Arc<Routes>) -> Result<Response<
     headers.insert(hyper::header::CACHE_CONTROL, hyper::header::HeaderValue::from_static("no-cache"));
     Ok(resp)
 }
-
-/// What `/` says until the map is served there.
-const INDEX: &[u8] = b"fuse1090\n\n/data/aircraft.json   every aircraft, in readsb's format\n\
-/data/receiver.json   the network's centre and refresh, as tar1090 reads it\n\
-/data/receivers.json  every receiver: position, clock, frames/s, learnt timing\n\
-/metrics              Prometheus text\n";
 
 /// Serves until the task is dropped.
 pub async fn serve(

@@ -17,6 +17,7 @@ pub mod config;
 pub mod http;
 pub mod inputs;
 pub mod loglimit;
+pub mod map_assets;
 pub mod outputs;
 pub mod record;
 pub mod registry;
@@ -281,10 +282,11 @@ async fn start_http(
     let listener = tokio::net::TcpListener::bind(addr)
         .await
         .with_context(|| format!("the HTTP server ([http] listen) cannot bind {addr}"))?;
-    let data = Arc::new(web::WebData::default());
+    let data =
+        Arc::new(web::WebData::new(cfg.http.map_tiles.as_deref(), cfg.http.map_attribution.as_deref()));
     let routes = http::Routes { metrics: Some(handle), web: Some(data.clone()) };
     tasks.push(tokio::spawn(http::serve(listener, routes, registry.http.clone(), cfg.http.max_connections)));
-    tracing::info!(address = %addr, "HTTP: /data/aircraft.json, /data/receivers.json, /metrics");
+    tracing::info!(address = %addr, "HTTP: the map at /, /data/aircraft.json, /data/receivers.json, /metrics");
     Ok((tasks, Some(data)))
 }
 

@@ -28,6 +28,7 @@ pub struct WebData {
     aircraft: Mutex<Bytes>,
     receivers: Mutex<Bytes>,
     receiver: Mutex<Bytes>,
+    map: Mutex<Bytes>,
 }
 
 /// The documents the server can be asked for.
@@ -36,6 +37,8 @@ pub enum Document {
     Aircraft,
     Receivers,
     Receiver,
+    /// The map's settings (`map.json`: the tile URL and its attribution).
+    Map,
 }
 
 impl WebData {
@@ -44,7 +47,16 @@ impl WebData {
             Document::Aircraft => &self.aircraft,
             Document::Receivers => &self.receivers,
             Document::Receiver => &self.receiver,
+            Document::Map => &self.map,
         }
+    }
+
+    /// The documents, with the map's settings from `[http]`.
+    pub fn new(tiles: Option<&str>, attribution: Option<&str>) -> WebData {
+        let data = WebData::default();
+        let map = serde_json::json!({ "tiles": tiles, "attribution": attribution });
+        data.set(Document::Map, map.to_string().into_bytes());
+        data
     }
 
     pub fn get(&self, d: Document) -> Bytes {
@@ -203,6 +215,17 @@ fn receiver_record(ev: &Event) -> serde_json::Value {
 mod tests {
     use super::*;
     use crate::mlat::report::{ReceiverReport, RxState};
+
+    #[test]
+    fn the_maps_settings_are_served_as_configured() {
+        let map = |d: WebData| serde_json::from_slice::<serde_json::Value>(&d.get(Document::Map)).unwrap();
+        let url = "https://t.example/{z}/{x}/{y}.png";
+        assert_eq!(
+            map(WebData::new(Some(url), Some("© someone"))),
+            serde_json::json!({"tiles": url, "attribution": "© someone"})
+        );
+        assert_eq!(map(WebData::new(None, None)), serde_json::json!({"tiles": null, "attribution": null}));
+    }
 
     #[test]
     fn a_receivers_learnt_timing_is_kept_as_the_track_stream_writes_it() {

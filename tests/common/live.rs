@@ -144,3 +144,10 @@ pub fn demo(port: u16, speed: f64, output: &str) -> String {
         .replace("127.0.0.1:8090", &format!("127.0.0.1:{}", super::free_port()))
         + &format!("[[output]]\nformat = \"json\"\n{output}")
 }
+
+/// The demo's `[http]` table with `listen` on `port`, and `extra` in it.
+pub fn with_http(text: &str, port: u16, extra: &str) -> String {
+    let (head, tail) = text.split_once("[http]\nlisten = \"").expect("the demo serves HTTP");
+    let (_, rest) = tail.split_once('"').unwrap();
+    format!("{head}[http]\nlisten = \"127.0.0.1:{port}\"\n{extra}{rest}")
+}

@@ -1,0 +1,121 @@
+// Checks the live map in a real browser (Debian's chromium, driven by
+// playwright-core) against the daemon's own aircraft.json; run by
+// tests/live_map.rs as `node web/test/map.mjs BASE_URL SCREENSHOT.png`.
+//
+// What it asserts, each against the document the page drew (the page writes
+// that document's `now` on <body>; the check retries until a fresh fetch of
+// aircraft.json has the same `now`, so both sides see one refresh):
+// - the aircraft drawn are exactly those with a position, each labelled with
+//   its callsign and rotated to its track; the table lists every aircraft;
+// - the receivers drawn are those of receivers.json;
+// - clicking an aircraft selects it: its details and its table row;
+// - clicking a column sorts the table by it;
+// - the page asks nothing of any host but the daemon (it works offline)
+//   and logs no error.
+// It prints one JSON line of what it saw and exits non-zero on a failure.
+import { chromium } from 'playwright-core';
+
+const [base, shot] = process.argv.slice(2);
+const failures = [];
+const check = (ok, what) => { if (!ok) failures.push(what); };
+const sameSet = (a, b) => a.length === b.length && a.every((x, i) => x === b[i]);
+
+const browser = await chromium.launch({
+  executablePath: process.env.CHROMIUM || '/usr/bin/chromium',
+  args: ['--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run', '--disable-background-networking',
+    '--disable-component-update', '--disable-sync'],
+});
+try {
+  const page = await browser.newPage({ viewport: { width: 1400, height: 860 } });
+  const errors = [];
+  page.on('pageerror', (e) => errors.push(e.message));
+  page.on('console', (m) => { if (m.type() === 'error') errors.push(m.text()); });
+  const elsewhere = [];
+  page.on('request', (r) => { if (!r.url().startsWith(`${base}/`) && !r.url().startsWith('data:')) elsewhere.push(r.url()); });
+  await page.goto(`${base}/`);
+  await page.waitForFunction(() => Number(document.body.dataset.drawn) > 0, null, { timeout: 30000 });
+
+  // One refresh seen by both the page and a fresh fetch.
+  const snapshot = () => page.evaluate(async () => {
+    const now = document.body.dataset.now;
+    const markers = [...document.querySelectorAll('.leaflet-marker-pane .ac[data-hex]')].map((e) => ({
+      hex: e.dataset.hex,
+      label: e.querySelector('.label').textContent,
+      rotate: e.querySelector('path') ? e.querySelector('path').getAttribute('transform') : null,
+    }));
+    const rows = [...document.querySelectorAll('#table tbody tr')].map((e) => e.dataset.hex);
+    const doc = await (await fetch('data/aircraft.json', { cache: 'no-store' })).json();
+    return { now, markers, rows, doc };
+  });
+  let s = null;
+  for (let i = 0; i < 40; i++) {
+    s = await snapshot();
+    if (String(s.doc.now) === s.now) break;
+    s = null;
+    await page.waitForTimeout(100);
+  }
+  check(s !== null, 'never saw the page and a fetch on the same refresh');
+  if (s) {
+    const positioned = s.doc.aircraft.filter((a) => typeof a.lat === 'number');
+    const drawn = s.markers.map((m) => m.hex).sort();
+    check(sameSet(drawn, positioned.map((a) => a.hex).sort()),
+      `drawn ${drawn} but aircraft.json has positions for ${positioned.map((a) => a.hex).sort()}`);
+    check(sameSet(s.rows.slice().sort(), s.doc.aircraft.map((a) => a.hex).sort()), 'the table does not list every aircraft');
+    for (const a of positioned) {
+      const m = s.markers.find((x) => x.hex === a.hex);
+      if (!m) continue;
+      const name = (a.flight || '').trim() || a.hex;
+      check(m.label.startsWith(name), `${a.hex} labelled ${m.label}, not ${name}`);
+      if (typeof a.track === 'number') check(m.rotate === `rotate(${a.track})`, `${a.hex} rotated ${m.rotate}, track ${a.track}`);
+    }
+  }
+
+  const rx = await page.evaluate(async () => ({
+    drawn: document.querySelectorAll('.leaflet-marker-pane .receiver').length,
+    listed: (await (await fetch('data/receivers.json')).json()).receivers.length,
+  }));
+  check(rx.drawn === rx.listed && rx.listed > 0, `${rx.drawn} receivers drawn, ${rx.listed} listed`);
+
+  // Select the first aircraft with a callsign by clicking its symbol.
+  const target = s && s.doc.aircraft.find((a) => typeof a.lat === 'number' && (a.flight || '').trim());
+  let selected = null;
+  if (target) {
+    await page.click(`.leaflet-marker-pane .ac[data-hex="${target.hex}"] svg`, { force: true });
+    await page.waitForSelector('#details:not([hidden]) dd[data-field="hex"]', { timeout: 5000 });
+    selected = await page.evaluate(() => ({
+      title: document.querySelector('#details h2').textContent,
+      hex: document.querySelector('#details dd[data-field="hex"]').textContent,
+      row: document.querySelector('#table tbody tr.selected')?.dataset.hex,
+      marker: document.querySelector('.leaflet-marker-pane .ac.selected')?.dataset.hex,
+    }));
+    check(selected.hex === target.hex && selected.title === target.flight.trim(),
+      `clicked ${target.hex} (${target.flight.trim()}), details show ${selected.hex} (${selected.title})`);
+    check(selected.row === target.hex && selected.marker === target.hex, `the selection is not highlighted: ${JSON.stringify(selected)}`);
+  } else {
+    check(false, 'no aircraft with a callsign and a position to select');
+  }
+
+  // Sort by address, ascending, then descending.
+  await page.click('#table th[data-key="hex"]');
+  const up = await page.$$eval('#table tbody tr', (rows) => rows.map((r) => r.dataset.hex));
+  await page.click('#table th[data-key="hex"]');
+  const down = await page.$$eval('#table tbody tr', (rows) => rows.map((r) => r.dataset.hex));
+  check(up.length > 1 && sameSet(up, up.slice().sort()), `not sorted up by hex: ${up}`);
+  check(sameSet(down, down.slice().sort().reverse()), `not sorted down by hex: ${down}`);
+  // The screenshot shows the table sorted by altitude, as it opens.
+  await page.click('#table th[data-key="alt"]');
+
+  check(errors.length === 0, `page errors: ${errors.join('; ')}`);
+  check(elsewhere.length === 0, `requests beyond the daemon: ${elsewhere.join(' ')}`);
+  await page.screenshot({ path: shot });
+  console.log(JSON.stringify({
+    aircraft: s ? s.doc.aircraft.length : 0,
+    drawn: s ? s.markers.length : 0,
+    receivers: rx.drawn,
+    selected,
+    failures,
+  }));
+} finally {
+  await browser.close();
+}
+process.exit(failures.length === 0 ? 0 : 1);
