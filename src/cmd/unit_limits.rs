@@ -1,9 +1,11 @@
 //! `fuse1090 unit-limits CONFIG [--allow ADDR ...]`: a systemd drop-in that
 //! limits the service's network to what its configuration uses.
 //!
-//! - `SocketBindAllow=` the input ports and the metrics port, then
-//!   `SocketBindDeny=any`: the service can listen nowhere else (outputs and
-//!   TCP clients never call bind; the kernel picks their ports at connect).
+//! - `SocketBindAllow=` the input ports, the HTTP and metrics ports and
+//!   the ports of `tcp_server` outputs, then
+//!   `SocketBindDeny=any`: the service can listen nowhere else (other
+//!   outputs and TCP clients never call bind; the kernel picks their ports
+//!   at connect).
 //! - `IPAddressAllow=` localhost, the receivers' source addresses, the TCP
 //!   clients' peers, the outputs' destinations and whatever `--allow` adds
 //!   (a Prometheus server, say), then `IPAddressDeny=any`: packets from or
@@ -23,7 +25,7 @@ use std::path::Path;
 use anyhow::Result;
 
 use crate::config::Config;
-use crate::live::config::InputKind;
+use crate::live::config::{InputKind, OutputKind};
 
 pub fn run(file: &Path, allow: &[IpAddr]) -> Result<()> {
     let cfg = Config::load(file)?;
@@ -45,6 +47,11 @@ pub fn limits(cfg: &Config, allow: &[IpAddr], name: &str) -> String {
     }
     for a in cfg.service.metrics_listen.iter().chain(&cfg.http.listen) {
         binds.insert(format!("tcp:{}", a.port()));
+    }
+    for o in cfg.output.iter().filter(|o| o.kind == OutputKind::TcpServer) {
+        if let Some(a) = o.address {
+            binds.insert(format!("tcp:{}", a.port()));
+        }
     }
     for b in &binds {
         out += &format!("SocketBindAllow={b}\n");
@@ -87,12 +94,16 @@ fn peers(cfg: &Config, allow: &[IpAddr]) -> Result<BTreeSet<IpAddr>, String> {
             }
         }
     }
-    for o in &cfg.output {
+    for o in cfg.output.iter().filter(|o| o.kind != OutputKind::TcpServer) {
         if let Some(a) = o.address {
             addrs.insert(a.ip());
         }
     }
-    let servers = [("metrics", cfg.service.metrics_listen), ("HTTP", cfg.http.listen)];
+    let stream_servers =
+        cfg.output.iter().filter(|o| o.kind == OutputKind::TcpServer).map(|o| ("an output", o.address));
+    let servers = [("metrics", cfg.service.metrics_listen), ("HTTP", cfg.http.listen)]
+        .into_iter()
+        .chain(stream_servers);
     for (what, at) in servers {
         if let Some(a) = at.filter(|a| !a.ip().is_loopback() && allow.is_empty()) {
             return Err(format!(
@@ -116,6 +127,27 @@ mod tests {
             "{text}"
         );
         assert!(text.ends_with("IPAddressAllow=localhost\nIPAddressDeny=any\n"), "{text}");
+    }
+
+    #[test]
+    fn a_tcp_output_binds_its_port_and_a_push_is_a_peer() {
+        let text = r#"
+[[output]]
+kind = "tcp_server"
+address = "0.0.0.0:30005"
+format = "beast"
+[[output]]
+kind = "tcp_connect"
+address = "192.0.2.7:30104"
+format = "beast"
+"#;
+        let cfg: Config = toml::from_str(text).unwrap();
+        let out = limits(&cfg, &[], "x");
+        assert!(out.contains("SocketBindAllow=tcp:30005\nSocketBindDeny=any\n"), "{out}");
+        assert!(out.contains("# No IPAddressAllow") && out.contains("an output on 0.0.0.0:30005"), "{out}");
+        let out = limits(&cfg, &["192.0.2.9".parse().unwrap()], "x");
+        assert!(out.contains("IPAddressAllow=192.0.2.7\nIPAddressAllow=192.0.2.9\n"), "{out}");
+        assert!(!out.contains("IPAddressAllow=0.0.0.0"), "{out}");
     }
 
     #[test]

@@ -321,8 +321,32 @@ fn beast() -> InputFormat {
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
 pub enum OutputFormat {
+    /// The track stream: one JSON object per datagram or line.
     Json,
+    /// ASTERIX CAT062 data blocks (UDP).
     Asterix062,
+    /// Multilateration results as Beast extended squitters, as mlat-client
+    /// sends them (TCP).
+    Beast,
+    /// SBS / BaseStation text lines, the port-30003 convention (TCP).
+    Sbs,
+}
+
+impl OutputFormat {
+    /// As the configuration spells it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Json => "json",
+            Self::Asterix062 => "asterix062",
+            Self::Beast => "beast",
+            Self::Sbs => "sbs",
+        }
+    }
+
+    /// A byte stream, not datagrams: carried over TCP only.
+    pub fn is_stream(self) -> bool {
+        matches!(self, OutputFormat::Beast | OutputFormat::Sbs)
+    }
 }
 
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
@@ -332,12 +356,33 @@ pub enum OutputKind {
     Udp,
     /// JSON lines on standard output, for a look.
     Stdout,
+    /// Subscribers connect to `address` (like readsb's 30005 or 30003).
+    TcpServer,
+    /// Pushed to `address`, reconnecting (like mlat-client's
+    /// `--results beast,connect,host:30104`).
+    TcpConnect,
+}
+
+impl OutputKind {
+    /// As the configuration spells it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Udp => "udp",
+            Self::Stdout => "stdout",
+            Self::TcpServer => "tcp_server",
+            Self::TcpConnect => "tcp_connect",
+        }
+    }
+
+    pub fn is_tcp(self) -> bool {
+        matches!(self, OutputKind::TcpServer | OutputKind::TcpConnect)
+    }
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct OutputConfig {
-    /// udp or stdout.
+    /// udp, stdout, tcp_server or tcp_connect.
     #[serde(default = "udp")]
     pub kind: OutputKind,
     #[serde(default)]
@@ -348,6 +393,14 @@ pub struct OutputConfig {
     pub multicast_ttl: u32,
     #[serde(default)]
     pub multicast_interface: Option<std::net::Ipv4Addr>,
+    /// tcp_server: subscribers served at once; more are closed at accept
+    /// and counted.
+    #[serde(default = "max_clients")]
+    pub max_clients: usize,
+}
+
+fn max_clients() -> usize {
+    64
 }
 
 fn udp() -> OutputKind {
@@ -455,8 +508,20 @@ pub fn validate(
     }
     for (i, o) in outputs.iter().enumerate() {
         let at = format!("[[output]] {}", i + 1);
-        if o.kind == OutputKind::Udp && o.address.is_none() {
-            errs.push(format!("{at}: udp needs address"));
+        if (o.kind == OutputKind::Udp || o.kind.is_tcp()) && o.address.is_none() {
+            errs.push(format!("{at}: {} needs address", o.kind.name()));
+        }
+        if o.format.is_stream() && !o.kind.is_tcp() {
+            errs.push(format!(
+                "{at}: format = {}: a byte stream, over tcp_server or tcp_connect",
+                o.format.name()
+            ));
+        }
+        if o.format == OutputFormat::Asterix062 && o.kind != OutputKind::Udp {
+            errs.push(format!("{at}: asterix062 goes over udp"));
+        }
+        if !(1..=10_000).contains(&o.max_clients) {
+            errs.push(format!("{at}: max_clients = {} must be in 1..=10000", o.max_clients));
         }
         if o.address.is_some_and(|a| a.port() == 0) {
             errs.push(format!("{at}: address: port 0 is no port"));

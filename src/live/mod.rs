@@ -25,6 +25,7 @@ pub mod replay;
 mod report;
 pub mod server;
 pub mod stamp;
+pub mod stream_out;
 pub mod web;
 
 use std::path::{Path, PathBuf};
@@ -33,7 +34,7 @@ use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 
 use crate::config::Config;
 use crate::core::front::KnownReceiver;
@@ -160,7 +161,11 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
         registry.add(r.clone());
         decls.push(r.known());
     }
-    let outputs = Outputs::new(&cfg.output, &cfg.service);
+    let (mut streams, failed) = stream_out::start_all(&cfg.output, &[]).await;
+    if let Some((n, e)) = failed.into_iter().next() {
+        bail!("[[output]] {n} cannot start: {e}");
+    }
+    let outputs = Outputs::new(&cfg.output, &cfg.service, &streams);
     let recorder = match &cfg.service.record {
         None => None,
         Some(p) => {
@@ -227,7 +232,7 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
                 let _ = sd_notify::notify(&[sd_notify::NotifyState::Reloading]);
                 let status = match Config::load(&path) {
                     Ok(new) => {
-                        let left_out = reload(&new, &current, &registry, &tx, &mut tasks, &spawn_all).await;
+                        let left_out = reload(&new, &current, &registry, &tx, &mut tasks, &spawn_all, &mut streams).await;
                         current = new;
                         match left_out {
                             0 => "running; configuration re-read".to_string(),
@@ -309,6 +314,7 @@ async fn reload(
     tx: &std::sync::mpsc::SyncSender<ToCore>,
     tasks: &mut Vec<tokio::task::JoinHandle<()>>,
     spawn_all: &impl Fn(&[InputConfig], Vec<inputs::Bound>) -> Vec<tokio::task::JoinHandle<()>>,
+    streams: &mut Vec<Arc<stream_out::Stream>>,
 ) -> usize {
     // New receivers added, known ones updated in place, removed ones
     // revoked (their connections closed).
@@ -322,7 +328,12 @@ async fn reload(
     {
         tracing::warn!("SIGHUP: [http] listen and metrics_listen take effect at the next start");
     }
-    let _ = tx.send(ToCore::Outputs(Outputs::new(&new.output, &new.service)));
+    let (started, failed) = stream_out::start_all(&new.output, streams).await;
+    for (n, e) in failed {
+        tracing::error!("SIGHUP: [[output]] {n} cannot start: {e}; going on without it");
+    }
+    *streams = started;
+    let _ = tx.send(ToCore::Outputs(Outputs::new(&new.output, &new.service, streams)));
     if new.input == current.input {
         return 0;
     }

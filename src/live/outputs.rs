@@ -1,5 +1,6 @@
 //! Output destinations: UDP (unicast or multicast) in JSON or ASTERIX
-//! CAT062, or JSON lines on stdout. Nothing here may block the core:
+//! CAT062, JSON lines on stdout, and TCP streams (JSON lines, Beast, SBS;
+//! their sockets are [`super::stream_out`]'s). Nothing here may block the core:
 //! sockets are non-blocking, and stdout (a pipe nobody reads blocks its
 //! writer for good) is written by a thread of its own behind a bounded
 //! queue, whose overflow is dropped and counted. Every error is counted:
@@ -16,28 +17,69 @@ use std::sync::{Arc, OnceLock};
 
 use socket2::{Domain, Protocol, Socket, Type};
 
+use hyper::body::Bytes;
+
 use super::config::{OutputConfig, OutputFormat, OutputKind, ServiceConfig};
+use super::stream_out::Stream;
 use crate::core::Event;
-use crate::publish::{asterix, json};
+use crate::publish::sbs::SbsWriter;
+use crate::publish::{asterix, beast, json, readout};
 
 pub struct Destination {
     pub cfg: OutputConfig,
     socket: Option<UdpSocket>,
+    /// A TCP output's subscribers.
+    stream: Option<Arc<Stream>>,
+    /// An SBS output's memory of what it said.
+    sbs: Option<SbsWriter>,
     pub sent: u64,
     errors: u64,
     /// Lines a stdout output could not queue (its reader too slow).
-    pub dropped: u64,
+    dropped: u64,
     last_error_log: f64,
 }
 
 impl Destination {
     /// Sends that failed (for stdout, the writer's failed writes, which
-    /// every stdout output shares).
+    /// every stdout output shares; for TCP, failed connects and accepts,
+    /// broken connections and subscribers refused over `max_clients`).
     pub fn errors(&self) -> u64 {
+        let stream = self.stream.as_ref().map_or(0, |s| {
+            s.counters.errors.load(Ordering::Relaxed) + s.counters.refused.load(Ordering::Relaxed)
+        });
         match self.cfg.kind {
             OutputKind::Stdout => self.errors + stdout_writer().errors.load(Ordering::Relaxed),
-            OutputKind::Udp => self.errors,
+            OutputKind::Udp | OutputKind::TcpServer | OutputKind::TcpConnect => self.errors + stream,
         }
+    }
+
+    /// What a slow reader cost: stdout lines not queued, TCP subscribers
+    /// dropped for falling behind, batches a pushed connection missed.
+    pub fn dropped(&self) -> u64 {
+        self.dropped
+            + self.stream.as_ref().map_or(0, |s| {
+                s.counters.slow_dropped.load(Ordering::Relaxed) + s.counters.missed.load(Ordering::Relaxed)
+            })
+    }
+
+    /// Hands a batch to a TCP output's subscribers.
+    fn stream_send(&mut self, bytes: Bytes) {
+        if bytes.is_empty() {
+            return;
+        }
+        match &self.stream {
+            Some(s) => {
+                s.send(bytes);
+                self.sent += 1;
+            }
+            // It could not bind at a reload: what it misses is counted.
+            None => self.errors += 1,
+        }
+    }
+
+    /// Subscribers connected now (TCP outputs).
+    pub fn clients(&self) -> u64 {
+        self.stream.as_ref().map_or(0, |s| s.counters.clients.load(Ordering::Relaxed))
     }
 }
 
@@ -124,7 +166,10 @@ pub struct Outputs {
 }
 
 impl Outputs {
-    pub fn new(cfgs: &[OutputConfig], service: &ServiceConfig) -> Outputs {
+    /// The destinations of `cfgs`; the TCP ones are among `streams`
+    /// (started by [`super::stream_out::start_all`]), and one missing there
+    /// (it could not bind) counts every batch as an error.
+    pub fn new(cfgs: &[OutputConfig], service: &ServiceConfig, streams: &[Arc<Stream>]) -> Outputs {
         let dests = cfgs
             .iter()
             .map(|c| {
@@ -141,6 +186,8 @@ impl Outputs {
                 Destination {
                     cfg: c.clone(),
                     socket,
+                    stream: streams.iter().find(|s| s.cfg == *c).cloned(),
+                    sbs: (c.format == OutputFormat::Sbs).then(SbsWriter::new),
                     sent: 0,
                     errors: 0,
                     dropped: 0,
@@ -163,20 +210,27 @@ impl Outputs {
         }
         let mut lines: Option<Vec<Vec<u8>>> = None;
         let mut blocks: Option<Vec<Vec<u8>>> = None;
+        let mut mlat_frames: Option<Bytes> = None;
         for d in &mut self.dests {
+            if d.cfg.kind.is_tcp() {
+                let bytes = match (d.cfg.format, &mut d.sbs) {
+                    (OutputFormat::Sbs, Some(w)) => {
+                        let mut text = String::new();
+                        w.write(events, now, &mut text);
+                        Bytes::from(text)
+                    }
+                    (OutputFormat::Beast, _) => {
+                        mlat_frames.get_or_insert_with(|| beast_frames(events)).clone()
+                    }
+                    _ => newline_joined(lines.get_or_insert_with(|| json_lines(events, &name))),
+                };
+                d.stream_send(bytes);
+                continue;
+            }
             let payloads = match d.cfg.format {
-                OutputFormat::Json => lines.get_or_insert_with(|| {
-                    events
-                        .iter()
-                        .filter(|e| !matches!(e, Event::Position(_)))
-                        .map(|e| {
-                            let mut b = Vec::new();
-                            json::write_event(&mut b, e, &name);
-                            b.pop(); // the newline: one object per datagram
-                            b
-                        })
-                        .collect()
-                }),
+                OutputFormat::Json | OutputFormat::Beast | OutputFormat::Sbs => {
+                    lines.get_or_insert_with(|| json_lines(events, &name))
+                }
                 OutputFormat::Asterix062 => blocks.get_or_insert_with(|| {
                     let records: Vec<Vec<u8>> = events
                         .iter()
@@ -231,4 +285,34 @@ impl Outputs {
             }
         }
     }
+}
+
+/// Each event of the track stream as one JSON object, without its newline.
+fn json_lines<'a>(events: &[Event], name: &impl Fn(usize) -> &'a str) -> Vec<Vec<u8>> {
+    events
+        .iter()
+        .filter(|e| !matches!(e, Event::Position(_)))
+        .map(|e| {
+            let mut b = Vec::new();
+            json::write_event(&mut b, e, name);
+            b.pop(); // the newline: one object per datagram
+            b
+        })
+        .collect()
+}
+
+/// The Beast frames of the multilateration results among `events`.
+fn beast_frames(events: &[Event]) -> Bytes {
+    let mut out = Vec::new();
+    for e in events {
+        if let Event::Track(r) = e {
+            beast::mlat_result(r, &readout::readout(r), &mut out);
+        }
+    }
+    Bytes::from(out)
+}
+
+/// JSON objects as lines, for a byte stream.
+fn newline_joined(lines: &[Vec<u8>]) -> Bytes {
+    Bytes::from(lines.iter().flat_map(|l| l.iter().chain(b"\n")).copied().collect::<Vec<u8>>())
 }

@@ -129,7 +129,7 @@ pub(super) fn stats_line(
         })
         .collect();
     let out_err: u64 = outputs.dests.iter().map(|d| d.errors()).sum();
-    let out_dropped: u64 = outputs.dests.iter().map(|d| d.dropped).sum();
+    let out_dropped: u64 = outputs.dests.iter().map(|d| d.dropped()).sum();
     tracing::info!(
         "stats: frames {} [{}], messages {}, aircraft {}, tracks {}, fixes {} ({:.1}/s), suspects {}, conflicts {}, \
          rejected measurements {}, fusion fallbacks {}, unknown senders {}, socket errors {}, queue drops {}, \
@@ -212,6 +212,10 @@ pub(super) fn metrics(front: &FrontSnapshot, back: &Back, reg: &Registry, output
     metrics::counter!("fuse1090_fusion_fallbacks_total").absolute(f.fusion_fallbacks);
     metrics::counter!("fuse1090_output_errors_total")
         .absolute(outputs.dests.iter().map(|d| d.errors()).sum());
-    // Lines a stdout output's reader was too slow for.
-    metrics::counter!("fuse1090_output_drops_total").absolute(outputs.dests.iter().map(|d| d.dropped).sum());
+    // What slow readers cost: stdout lines, TCP subscribers dropped, batches
+    // a pushed connection missed.
+    metrics::counter!("fuse1090_output_drops_total")
+        .absolute(outputs.dests.iter().map(|d| d.dropped()).sum());
+    metrics::gauge!("fuse1090_output_clients")
+        .set(outputs.dests.iter().map(|d| d.clients()).sum::<u64>() as f64);
 }

@@ -67,6 +67,15 @@ pub fn df17(ca: u8, addr: u32, me: u64) -> [u8; 14] {
     f
 }
 
+/// A DF18 frame (extended squitter from a non-transponder device: `cf` 2 is
+/// fine TIS-B with an ICAO address, what multilateration results are sent as).
+pub fn df18(cf: u8, addr: u32, me: u64) -> [u8; 14] {
+    let mut f = df17(0, addr, me);
+    f[0] = (18 << 3) | (cf & 7);
+    set_parity(&mut f, 0);
+    f
+}
+
 /// DF11 all-call reply.
 pub fn df11(ca: u8, addr: u32, iid: u32) -> [u8; 7] {
     let mut f = [0u8; 7];

@@ -23,24 +23,13 @@ use serde::Serialize;
 use crate::core::Event;
 use crate::fuse::{Alert, TrackReport};
 use crate::publish::json::round;
+use crate::publish::readout::readout;
 
 /// An aircraft leaves the view this long (s) after its fused track's last
 /// publication: a track that stopped being published has ended.
 pub const TRACK_TTL_S: f64 = 60.0;
-/// `gs` is published once each velocity component is known to this (1
-/// sigma, m/s): a 95% error within 10 m/s, what NACv 1 promises. A track
-/// just started knows its velocity poorly, and readsb's `gs` is a measured
-/// speed, not a guess.
-pub const MAX_VEL_SIGMA_MS: f64 = 4.0;
-/// `track` is published once the speed is this many sigmas: a direction is
-/// meaningless for an aircraft that may be standing still.
-const TRACK_MIN_SIGMAS: f64 = 3.0;
-
 /// The most aircraft the view holds; beyond it the stalest is forgotten.
 pub const MAX_AIRCRAFT: usize = 100_000;
-
-const M_TO_FT: f64 = 1.0 / 0.3048;
-const MS_TO_KT: f64 = 3600.0 / 1852.0;
 
 #[derive(Clone, Debug)]
 struct Entry {
@@ -209,16 +198,12 @@ impl AircraftView {
 fn aircraft(e: &Entry, now: f64) -> Aircraft<'_> {
     let r = &e.track;
     let est = &r.est;
-    let [ve, vn, vu] = est.vel_enu;
-    let adsb = r.sources.contains(&"adsb");
+    let ro = readout(r);
+    let adsb = ro.adsb;
     // What multilateration alone gave, readsb's way of saying a field is not
     // the aircraft's own report.
     let mlat = if adsb { Vec::new() } else { vec!["lat", "lon", "gs", "track", "geom_rate", "alt_geom"] };
     let cov = est.cov_en();
-    let p = &est.state.p;
-    let vel_sigma = (0.5 * (p[(2, 2)] + p[(3, 3)])).max(0.0).sqrt();
-    let speed = ve.hypot(vn);
-    let known = vel_sigma <= MAX_VEL_SIGMA_MS;
     Aircraft {
         hex: format!("{:06x}", r.addr),
         kind: if adsb { "adsb_icao" } else { "mlat" },
@@ -228,11 +213,10 @@ fn aircraft(e: &Entry, now: f64) -> Aircraft<'_> {
         } else {
             r.alt_baro_ft.map(serde_json::Value::from)
         },
-        alt_geom: est.alt_m.map(|a| (a * M_TO_FT).round() as i64),
-        gs: known.then(|| round(speed * MS_TO_KT, 10.0)),
-        track: (known && speed > TRACK_MIN_SIGMAS * vel_sigma)
-            .then(|| round(ve.atan2(vn).to_degrees().rem_euclid(360.0), 100.0)),
-        geom_rate: est.alt_m.map(|_| (vu * M_TO_FT * 60.0).round() as i64),
+        alt_geom: ro.alt_geom_ft,
+        gs: ro.gs_kt.map(|v| round(v, 10.0)),
+        track: ro.track_deg.map(|v| round(v, 100.0)),
+        geom_rate: ro.geom_rate_fpm,
         squawk: r.squawk.map(|s| format!("{s:04x}")),
         lat: round(est.lat, 1e6),
         lon: round(est.lon, 1e6),
@@ -246,7 +230,7 @@ fn aircraft(e: &Entry, now: f64) -> Aircraft<'_> {
             sources: &r.sources,
             cov_en: cov.map(|row| row.map(|v| round(v, 10.0))),
             h95_m: round(h95(cov), 10.0),
-            vel_sigma_ms: round(vel_sigma, 100.0),
+            vel_sigma_ms: round(ro.vel_sigma_ms, 100.0),
             adsb_suspect: r.adsb_suspect,
             motion: r.motion.name(),
             period_s: r.period_s,
@@ -267,44 +251,12 @@ fn h95(c: [[f64; 2]; 2]) -> f64 {
 
 #[cfg(test)]
 mod tests {
-    use std::sync::Arc;
 
     use serde_json::Value;
 
     use super::*;
-    use crate::fuse::Sources;
-    use crate::track::kf::Gaussian;
-    use crate::track::motion::Motion;
-    use crate::track::plane::Plane;
-    use crate::track::Estimate;
-
-    fn report(addr: u32, t: f64, sources: &[&'static str]) -> TrackReport {
-        TrackReport {
-            id: 7,
-            addr,
-            source: "fused",
-            est: Estimate {
-                t,
-                lat: 43.5,
-                lon: 1.25,
-                alt_m: Some(1000.0),
-                // North-east at 100 m/s, climbing 5 m/s.
-                vel_enu: [100.0 / 2f64.sqrt(), 100.0 / 2f64.sqrt(), 5.0],
-                cov_local: [[100.0, 0.0], [0.0, 25.0]],
-                plane: Plane::new(43.5, 1.25, 0.0),
-                state: Gaussian { x: Default::default(), p: nalgebra::Matrix6::identity() },
-            },
-            alt_baro_ft: Some(3200),
-            sources: sources.iter().copied().collect::<Sources>(),
-            nac_p: Some(9),
-            period_s: 1.0,
-            motion: Motion::Moving,
-            adsb_suspect: false,
-            flight: Some(Arc::from("AFR12")),
-            squawk: Some(0x7001),
-            ages_s: [None, None],
-        }
-    }
+    use crate::publish::readout::MAX_VEL_SIGMA_MS;
+    use crate::publish::test_report::report;
 
     /// A decoded ADS-B position of `addr` at `t`.
     fn position(addr: u32, t: f64, surface: bool) -> crate::core::PositionReport {
