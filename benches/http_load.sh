@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
-# What serving the map's data costs the daemon: the demo run twice over the
-# same stretch of its replay, once with nobody polling and once with N
-# clients (20 by default) each fetching /data/aircraft.json and
-# /data/receivers.json once a second, as tar1090 does. Prints the daemon's
+# What serving the map costs the daemon: the demo run twice over the same
+# stretch of its replay, once with nobody polling and once with N clients
+# (20 by default) each doing what the live map at / does in a browser: load
+# the page and its files (the 1.2 MB coastlines among them) once, then fetch
+# /data/aircraft.json once a second and /data/receivers.json every tenth
+# time, as the map's script does (tar1090 polls aircraft.json alike). Prints the daemon's
 # CPU time (user + system, from /proc) over the window, for each run, as a
 # share of one core. Usage: benches/http_load.sh [BIN] [CLIENTS] [SECONDS]
 set -euo pipefail
@@ -32,11 +34,18 @@ run() {
 import sys, threading, time, urllib.request
 port, n, secs = int(sys.argv[1]), int(sys.argv[2]), float(sys.argv[3])
 end = time.time() + secs
+get = lambda path: urllib.request.urlopen(f"http://127.0.0.1:{port}{path}").read()
 def poll():
+    for path in ("/", "/leaflet.css", "/style.css", "/leaflet.js", "/app.js", "/data/map.json",
+                 "/data/receiver.json", "/world.json"):
+        get(path)
+    n = 0
     while time.time() < end:
         t = time.time()
-        for path in ("/data/aircraft.json", "/data/receivers.json"):
-            urllib.request.urlopen(f"http://127.0.0.1:{port}{path}").read()
+        if n % 10 == 0:
+            get("/data/receivers.json")
+        get("/data/aircraft.json")
+        n += 1
         time.sleep(max(0.0, 1.0 - (time.time() - t)))
 ts = [threading.Thread(target=poll) for _ in range(n)]
 [t.start() for t in ts]; [t.join() for t in ts]

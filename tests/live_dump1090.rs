@@ -5,10 +5,11 @@
 //!   fuse1090 multilaterated, as multilateration results, within 50 m of
 //!   fuse1090's tracks;
 //! - the SBS server (`tcp_server`, `format = "sbs"`) against dump1090's own
-//!   SBS output of the same recording (replayed into it): the same 22-field
-//!   layout per message type, the same fields filled, the same formats, and
-//!   the same callsign, altitude, position, speed, track and rate for the
-//!   same aircraft at the same time.
+//!   SBS output of the same recording, which fuse1090 forwards to it frame
+//!   by frame (`forward_frames`): the same 22-field layout per message type,
+//!   the same fields filled, the same formats, and the same callsign,
+//!   altitude, position, speed, track and rate for the same aircraft at the
+//!   same time.
 //!
 //! Without dump1090-mutability (`.ci/run` installs it) the tests say so
 //! through `common::skipped`.
@@ -216,20 +217,6 @@ fn time_of(f: &[String]) -> f64 {
     t[0] * 3600.0 + t[1] * 60.0 + t[2]
 }
 
-/// How far a replay moved the capture's times (s, modulo a day), from its log.
-fn replay_shift_s(log: &Path) -> f64 {
-    let t0 = Instant::now();
-    loop {
-        let text = std::fs::read_to_string(log).unwrap_or_default();
-        if let Some(ns) = text.split("shift_ns=").nth(1) {
-            let ns: i64 = ns.split(|c: char| !c.is_ascii_digit()).next().unwrap().parse().unwrap();
-            return (ns as f64 / 1e9).rem_euclid(86_400.0);
-        }
-        assert!(t0.elapsed() < Duration::from_secs(10), "no shift in {}", log.display());
-        std::thread::sleep(Duration::from_millis(50));
-    }
-}
-
 fn num(f: &[String], i: usize) -> f64 {
     f[i].parse().unwrap_or_else(|_| panic!("field {} of {f:?}", i + 1))
 }
@@ -241,36 +228,18 @@ fn sbs_lines_are_laid_out_and_valued_as_dump1090_writes_them() {
     let capture = root.join("fixtures/captures/fusion-8seg/capture.txt");
     let Some(d) = dump1090(work.path(), (43.6, 1.8)) else { return };
     let ours_port = common::free_port();
-    let outputs =
-        format!("[[output]]\nkind = \"tcp_server\"\naddress = \"127.0.0.1:{ours_port}\"\nformat = \"sbs\"\n");
+    let outputs = format!(
+        "[[output]]\nkind = \"tcp_server\"\naddress = \"127.0.0.1:{ours_port}\"\nformat = \"sbs\"\n\n\
+         [[output]]\nkind = \"tcp_connect\"\naddress = \"127.0.0.1:{}\"\nformat = \"beast\"\n\
+         forward_frames = true\n",
+        d.beast_in
+    );
     let cfg = work.path().join("c.toml");
     std::fs::write(&cfg, capture_config(&capture, common::free_port(), &outputs)).unwrap();
-    // The same recording into dump1090, by `fuse1090 replay` (which reaches
-    // the Beast server named in its configuration).
-    let replay_cfg = work.path().join("replay.toml");
-    std::fs::write(&replay_cfg, capture_config(&capture, d.beast_in, "")).unwrap();
-
     let log = work.path().join("d.log");
     let mut child = daemon(&cfg, &log, None);
     let (ours, theirs) = (read_for(ours_port, 14.0), read_for(d.sbs, 14.0));
-    let replay_log = work.path().join("replay.log");
-    let mut replay = common::live::bin()
-        .args(["replay", "--config"])
-        .arg(&replay_cfg)
-        .arg(&capture)
-        .env("RUST_LOG", "info")
-        .stderr(std::fs::File::create(&replay_log).unwrap())
-        .spawn()
-        .unwrap();
     let (ours, theirs) = (sbs_lines(&ours.join().unwrap()), sbs_lines(&theirs.join().unwrap()));
-    // The two replays started apart: each line's time taken back to the
-    // capture's (fuse1090's lines are of the estimate's time, dump1090's of
-    // when it heard the frame, which the replay sends at its moved time).
-    let (shift_ours, shift_theirs) = (replay_shift_s(&log), replay_shift_s(&replay_log));
-    let ours_t = |f: &[String]| time_of(f) - shift_ours;
-    let theirs_t = |f: &[String]| time_of(f) - shift_theirs;
-    let _ = replay.kill();
-    let _ = replay.wait();
     let _ = child.kill();
     let _ = child.wait();
 
@@ -290,8 +259,11 @@ fn sbs_lines_are_laid_out_and_valued_as_dump1090_writes_them() {
             assert!(date_time(f), "{f:?}");
             assert_eq!(filled(f), filled(&t[0]), "MSG,{kind}: ours {f:?}, dump1090's {:?}", t[0]);
             // dump1090's line of the same kind nearest in time.
+            // fuse1090's lines are of the estimate's time (the recording's,
+            // moved to today), dump1090's of when it heard the frame, which
+            // fuse1090 forwarded as it came at that moved time.
             let gap = |g: &Vec<String>| {
-                ((theirs_t(g) - ours_t(f) + 43_200.0).rem_euclid(86_400.0) - 43_200.0).abs()
+                ((time_of(g) - time_of(f) + 43_200.0).rem_euclid(86_400.0) - 43_200.0).abs()
             };
             let near = t.iter().min_by(|a, b| gap(a).total_cmp(&gap(b))).unwrap();
             let dt = gap(near);

@@ -397,6 +397,10 @@ pub struct OutputConfig {
     /// and counted.
     #[serde(default = "max_clients")]
     pub max_clients: usize,
+    /// beast: every frame received, from every receiver, as it came (its
+    /// receiver's timestamp and signal), besides the multilateration results.
+    #[serde(default)]
+    pub forward_frames: bool,
 }
 
 fn max_clients() -> usize {
@@ -519,6 +523,9 @@ pub fn validate(
         }
         if o.format == OutputFormat::Asterix062 && o.kind != OutputKind::Udp {
             errs.push(format!("{at}: asterix062 goes over udp"));
+        }
+        if o.forward_frames && o.format != OutputFormat::Beast {
+            errs.push(format!("{at}: forward_frames is for format = beast"));
         }
         if !(1..=10_000).contains(&o.max_clients) {
             errs.push(format!("{at}: max_clients = {} must be in 1..=10000", o.max_clients));

@@ -387,6 +387,7 @@ fn core_loop(
 ) {
     let (mut front, back) = Core::stages(&cfg);
     let mut cmds = Vec::new();
+    let mut forward = outputs.frame_forward();
     front.know(decls.clone());
     for KnownReceiver { decl: d, .. } in decls {
         if let Some(r) = &mut recorder {
@@ -457,6 +458,7 @@ fn core_loop(
                         if let Some(w) = &mut recorder {
                             w.frame(arrival, r, frame);
                         }
+                        forward.push(frame);
                         front.on_frame(r, arrival, frame, &mut cmds);
                     }
                     dispatched += frames.len() as u64;
@@ -471,6 +473,7 @@ fn core_loop(
                     front.add_receiver(d, &mut cmds);
                 }
                 ToCore::Outputs(o) => {
+                    forward = o.frame_forward();
                     if to_back.send(ToBack::Outputs(o)).is_err() {
                         break 'run;
                     }
@@ -483,6 +486,7 @@ fn core_loop(
                 msg = rx.try_recv().ok();
             }
         }
+        forward.flush();
         let now = unix_now();
         front.advance(now, &mut cmds);
         if now >= next_delay_metrics {

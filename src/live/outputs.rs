@@ -22,6 +22,7 @@ use hyper::body::Bytes;
 use super::config::{OutputConfig, OutputFormat, OutputKind, ServiceConfig};
 use super::stream_out::Stream;
 use crate::core::Event;
+use crate::feed::RawFrame;
 use crate::publish::sbs::SbsWriter;
 use crate::publish::{asterix, beast, json, readout};
 
@@ -202,6 +203,13 @@ impl Outputs {
         }
     }
 
+    /// The forwarding of received frames these outputs ask for.
+    pub fn frame_forward(&self) -> FrameForward {
+        let streams =
+            self.dests.iter().filter(|d| d.cfg.forward_frames).filter_map(|d| d.stream.clone()).collect();
+        FrameForward { streams, wire: Vec::new() }
+    }
+
     /// Sends a batch of events to every destination; `name` gives receivers'
     /// ids for the JSON records, `now` is for rate-limited logs.
     pub fn publish<'a>(&mut self, events: &[Event], name: impl Fn(usize) -> &'a str, now: f64) {
@@ -315,4 +323,32 @@ fn beast_frames(events: &[Event]) -> Bytes {
 /// JSON objects as lines, for a byte stream.
 fn newline_joined(lines: &[Vec<u8>]) -> Bytes {
     Bytes::from(lines.iter().flat_map(|l| l.iter().chain(b"\n")).copied().collect::<Vec<u8>>())
+}
+
+/// The received frames for the Beast outputs that forward them
+/// (`forward_frames`): collected by the core's front thread as they arrive
+/// and handed over once per batch.
+#[derive(Default)]
+pub struct FrameForward {
+    streams: Vec<Arc<Stream>>,
+    wire: Vec<u8>,
+}
+
+impl FrameForward {
+    pub fn push(&mut self, frame: &RawFrame) {
+        if !self.streams.is_empty() {
+            crate::feed::beast::encode(frame, &mut self.wire);
+        }
+    }
+
+    /// Sends what was collected since the last call.
+    pub fn flush(&mut self) {
+        if self.wire.is_empty() {
+            return;
+        }
+        let bytes = Bytes::from(std::mem::take(&mut self.wire));
+        for s in &self.streams {
+            s.send(bytes.clone());
+        }
+    }
 }

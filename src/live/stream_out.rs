@@ -252,6 +252,7 @@ mod tests {
             multicast_ttl: 1,
             multicast_interface: None,
             max_clients,
+            forward_frames: false,
         }
     }
 
