@@ -10,6 +10,10 @@
 // - the receivers drawn are those of receivers.json;
 // - clicking an aircraft selects it: its details and its table row;
 // - clicking a column sorts the table by it;
+// - alerts are drawn: the demo has none, so the page is then served the
+//   same document with one aircraft made ADS-B suspect and two put in
+//   conflict (through the browser's request routing), and must ring the one
+//   and join the two;
 // - the page asks nothing of any host but the daemon (it works offline)
 //   and logs no error.
 // It prints one JSON line of what it saw and exits non-zero on a failure.
@@ -102,12 +106,39 @@ try {
   const down = await page.$$eval('#table tbody tr', (rows) => rows.map((r) => r.dataset.hex));
   check(up.length > 1 && sameSet(up, up.slice().sort()), `not sorted up by hex: ${up}`);
   check(sameSet(down, down.slice().sort().reverse()), `not sorted down by hex: ${down}`);
-  // The screenshot shows the table sorted by altitude, as it opens.
+  // The screenshot: the demo as it is (before the alerts are made up
+  // below), the table sorted by altitude as it opens.
   await page.click('#table th[data-key="alt"]');
+  await page.screenshot({ path: shot });
+
+  // Alerts, on a document the test alters.
+  if (s) {
+    const withPos = s.doc.aircraft.filter((a) => typeof a.lat === 'number');
+    const [p, q, r] = withPos.map((a) => a.hex);
+    await page.route('**/data/aircraft.json', async (route) => {
+      const doc = await (await route.fetch()).json();
+      for (const a of doc.aircraft) {
+        a.fuse1090 = a.fuse1090 || {};
+        if (a.hex === p) a.fuse1090.adsb_suspect = true;
+        if (a.hex === q) a.fuse1090.conflicts = [r];
+        if (a.hex === r) a.fuse1090.conflicts = [q];
+      }
+      await route.fulfill({ json: doc });
+    });
+    await page.waitForSelector(`.leaflet-marker-pane .ac.suspect[data-hex="${p}"]`, { timeout: 5000 });
+    const alerts = await page.evaluate(() => ({
+      suspects: [...document.querySelectorAll('.leaflet-marker-pane .ac.suspect')].map((e) => e.dataset.hex),
+      lines: document.querySelectorAll('.leaflet-overlay-pane path[stroke="#d00000"]').length,
+      flagged: [...document.querySelectorAll('#table tr.suspect')].map((e) => e.dataset.hex),
+    }));
+    check(alerts.suspects.length === 1 && alerts.suspects[0] === p, `suspects drawn: ${alerts.suspects}, made: ${p}`);
+    check(alerts.flagged.length === 1 && alerts.flagged[0] === p, `suspects in the table: ${alerts.flagged}`);
+    check(alerts.lines === 1, `${alerts.lines} conflict lines for one pair`);
+    await page.unroute('**/data/aircraft.json');
+  }
 
   check(errors.length === 0, `page errors: ${errors.join('; ')}`);
   check(elsewhere.length === 0, `requests beyond the daemon: ${elsewhere.join(' ')}`);
-  await page.screenshot({ path: shot });
   console.log(JSON.stringify({
     aircraft: s ? s.doc.aircraft.length : 0,
     drawn: s ? s.markers.length : 0,
