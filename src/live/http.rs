@@ -96,12 +96,7 @@ pub async fn serve(
         let sock = match listener.accept().await {
             Ok((sock, _)) => sock,
             Err(e) => {
-                let n = counters.accept_errors.fetch_add(1, Ordering::Relaxed) + 1;
-                if n.is_power_of_two() {
-                    tracing::warn!(errors = n, "HTTP: accept failed: {e}; trying again");
-                }
-                in_a_row += 1;
-                tokio::time::sleep(Duration::from_millis((10u64 << in_a_row.min(7)).min(1000))).await;
+                accept_failed(&counters.accept_errors, &mut in_a_row, "HTTP", &e).await;
                 continue;
             }
         };
@@ -119,6 +114,18 @@ pub async fn serve(
             active.fetch_sub(1, Ordering::Relaxed);
         });
     }
+}
+
+/// After a failed accept (out of descriptors, most likely): counted, said
+/// at powers of two, and a pause that grows with the failures in a row, so
+/// that a listener never spins logging millions of lines.
+pub(super) async fn accept_failed(errors: &AtomicU64, in_a_row: &mut u32, what: &str, e: &std::io::Error) {
+    let n = errors.fetch_add(1, Ordering::Relaxed) + 1;
+    if n.is_power_of_two() {
+        tracing::warn!(errors = n, "{what}: accept failed: {e}; trying again");
+    }
+    *in_a_row += 1;
+    tokio::time::sleep(Duration::from_millis((10u64 << (*in_a_row).min(7)).min(1000))).await;
 }
 
 /// Serves one connection (any byte stream: the fuzz target hands it one in

@@ -138,14 +138,7 @@ async fn serve(listener: TcpListener, tx: broadcast::Sender<Bytes>, c: Arc<Strea
         let sock = match listener.accept().await {
             Ok((sock, _)) => sock,
             Err(e) => {
-                // Out of descriptors, most likely: counted, said at powers of
-                // two, retried after a growing pause rather than in a spin.
-                let n = c.errors.fetch_add(1, Ordering::Relaxed) + 1;
-                if n.is_power_of_two() {
-                    tracing::warn!(errors = n, "output: accept failed: {e}; trying again");
-                }
-                in_a_row += 1;
-                tokio::time::sleep(Duration::from_millis((10u64 << in_a_row.min(7)).min(1000))).await;
+                super::http::accept_failed(&c.errors, &mut in_a_row, "output", &e).await;
                 continue;
             }
         };

@@ -256,25 +256,7 @@ mod tests {
 
     use super::*;
     use crate::publish::readout::MAX_VEL_SIGMA_MS;
-    use crate::publish::test_report::report;
-
-    /// A decoded ADS-B position of `addr` at `t`.
-    fn position(addr: u32, t: f64, surface: bool) -> crate::core::PositionReport {
-        crate::core::PositionReport {
-            addr,
-            t,
-            lat: 43.5,
-            lon: 1.25,
-            alt_m: None,
-            alt_baro_ft: None,
-            alt_sigma_m: None,
-            nac_p: None,
-            sigma_m: None,
-            dating: crate::core::Dating::Arrival,
-            surface,
-            rx: 0,
-        }
-    }
+    use crate::publish::test_report::{position, report};
 
     fn rendered(view: &AircraftView, now: f64) -> Value {
         serde_json::from_slice(&view.render(now, 42)).unwrap()

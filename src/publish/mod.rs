@@ -51,4 +51,22 @@ pub(crate) mod test_report {
             ages_s: [None, None],
         }
     }
+
+    /// A decoded ADS-B position of `addr` at `t`.
+    pub fn position(addr: u32, t: f64, surface: bool) -> crate::core::PositionReport {
+        crate::core::PositionReport {
+            addr,
+            t,
+            lat: 43.5,
+            lon: 1.25,
+            alt_m: None,
+            alt_baro_ft: None,
+            alt_sigma_m: None,
+            nac_p: None,
+            sigma_m: None,
+            dating: crate::core::Dating::Arrival,
+            surface,
+            rx: 0,
+        }
+    }
 }

@@ -192,7 +192,7 @@ fn civil_from_days(z: i64) -> (i64, u32, u32) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::publish::test_report::report;
+    use crate::publish::test_report::{position, report};
 
     #[test]
     fn times_are_utc_dates_and_milliseconds() {
@@ -253,20 +253,7 @@ mod tests {
     #[test]
     fn a_surface_aircraft_gets_msg2_and_an_mlat_one_its_replies_altitude() {
         let mut w = SbsWriter::new();
-        let position = crate::core::PositionReport {
-            addr: 1,
-            t: 10.0,
-            lat: 43.5,
-            lon: 1.25,
-            alt_m: None,
-            alt_baro_ft: None,
-            alt_sigma_m: None,
-            nac_p: None,
-            sigma_m: None,
-            dating: crate::core::Dating::Arrival,
-            surface: true,
-            rx: 0,
-        };
+        let position = position(1, 10.0, true);
         let events = [Event::Position(position), Event::Track(Box::new(report(1, 10.0, &["adsb"])))];
         let got = lines(&mut w, &events, 10.0);
         assert_eq!(got[0][1], "2");
