@@ -78,6 +78,11 @@ impl Destination {
         }
     }
 
+    /// Bytes written to TCP subscribers.
+    pub fn stream_bytes(&self) -> u64 {
+        self.stream.as_ref().map_or(0, |s| s.counters.bytes.load(Ordering::Relaxed))
+    }
+
     /// Subscribers connected now (TCP outputs).
     pub fn clients(&self) -> u64 {
         self.stream.as_ref().map_or(0, |s| s.counters.clients.load(Ordering::Relaxed))

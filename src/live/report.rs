@@ -218,4 +218,6 @@ pub(super) fn metrics(front: &FrontSnapshot, back: &Back, reg: &Registry, output
         .absolute(outputs.dests.iter().map(|d| d.dropped()).sum());
     metrics::gauge!("fuse1090_output_clients")
         .set(outputs.dests.iter().map(|d| d.clients()).sum::<u64>() as f64);
+    metrics::counter!("fuse1090_output_stream_bytes_total")
+        .absolute(outputs.dests.iter().map(|d| d.stream_bytes()).sum());
 }
