@@ -21,7 +21,7 @@ use crate::fuse::conformance::{ConformanceConfig, Monitor};
 use crate::geo::geodetic_to_ecef;
 use crate::geo::{FT_TO_M, KT_TO_MS};
 use crate::mlat::baro::{BaroCorrection, RegionalBaro};
-use crate::mlat::engine::baro_height;
+use crate::mlat::engine::{baro_height, GroupOutcome};
 use crate::mlat::group::{Added, Group, GroupInfo, Grouper};
 use crate::mlat::timing::KnownTiming;
 use crate::mlat::Mlat;
@@ -598,11 +598,11 @@ const MIN_INDEPENDENT_SHARE: f64 = 0.01;
 impl GroupCtx<'_> {
     fn on_group(&mut self, g: &Group, now: f64, cmds: &mut Vec<Cmd>) {
         self.learn_delay(g);
-        let Some(fix) = self.mlat.on_group(g, now) else {
-            if let Some(t) = self.mlat.take_tdoa() {
-                cmds.push(Cmd::Tdoa { g: t, now });
-            }
-            return;
+        let fix = match self.mlat.on_group(g, now) {
+            GroupOutcome::Fix(fix) => fix,
+            GroupOutcome::Tdoa(t) => return cmds.push(Cmd::Tdoa { g: t, now }),
+            // Counted by the engine.
+            GroupOutcome::NoFix(_) => return,
         };
         self.stats.fixes += 1;
         let c = fix.cov_en;
@@ -636,7 +636,7 @@ impl GroupCtx<'_> {
         let pair = g.info.report.filter(|_| fix.dof >= 1 && fix.chi2 <= 3.0).map(|(lat, lon, sigma)| {
             (crate::track::plane::Plane::new(lat, lon, 0.0).to_en(fix.lat, fix.lon), sigma)
         });
-        cmds.push(Cmd::Event(Event::Mlat(Box::new(fix))));
+        cmds.push(Cmd::Event(Event::Mlat(fix)));
         if let Some((d, sigma)) = pair {
             let v = sigma * sigma;
             let s = [

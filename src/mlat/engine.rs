@@ -15,7 +15,7 @@ use crate::FastMap;
 use serde::Deserialize;
 
 use super::clock::PairParams;
-use super::group::Group;
+use super::group::{Group, GroupInfo};
 use super::solver::{solve, AltitudeConstraint, AtFix, Measurement, Reject, SolverLimits, C_AIR};
 use super::sync::{ClockSync, GroupVec, LocalCopy};
 use crate::feed::capture::{ClockKind, ReceiverDecl};
@@ -188,6 +188,62 @@ pub struct TdoaGroup {
     pub sites: Vec<([f64; 3], f64, f64)>,
 }
 
+/// What multilateration made of one group.
+#[derive(Clone, Debug, PartialEq)]
+pub enum GroupOutcome {
+    Fix(Box<MlatFix>),
+    /// Too few synchronised sites for a fix, or to choose between a fix's
+    /// two solutions, but enough for a track that knows where the aircraft
+    /// is: the time differences, for the tracker.
+    Tdoa(TdoaGroup),
+    /// Nothing for the tracker, and why (each reason also counted in
+    /// [`MlatStats`]).
+    NoFix(NoFix),
+}
+
+/// Why a group gave no fix.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NoFix {
+    /// Undecoded, or fewer than two usable copies, or too few sites.
+    TooFewReceivers,
+    /// An ADS-B aircraft multilaterated less than `adsb_interval_s` ago.
+    AdsbRecent,
+    /// The solver's (or the choice of solution's) reason.
+    Rejected(Reject),
+    /// Exactly determined, from an address nothing has confirmed.
+    UnverifiedAddress,
+}
+
+impl GroupOutcome {
+    /// The fix, if the group gave one.
+    pub fn fix(self) -> Option<MlatFix> {
+        match self {
+            GroupOutcome::Fix(f) => Some(*f),
+            _ => None,
+        }
+    }
+}
+
+/// A barometric altitude recent enough to constrain a fix: feet, its
+/// variance (m^2: the 25 ft steps and the climb since), and its correction
+/// to the ellipsoid as known when it was reported.
+#[derive(Clone, Copy)]
+struct Baro {
+    ft: i32,
+    var_m2: f64,
+    correction: Option<BaroCorrection>,
+}
+
+/// A group's copies fit for a fix: on their receivers' local time, with
+/// their arrivals (server time), and every copy (excluded receivers' too)
+/// when an excluded receiver's copy was left out and the group has ADS-B
+/// to survey it with.
+struct ForFix {
+    copies: GroupVec<LocalCopy>,
+    arrivals: GroupVec<f64>,
+    all_copies: Option<GroupVec<LocalCopy>>,
+}
+
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct MlatStats {
     pub groups: u64,
@@ -344,8 +400,6 @@ pub struct Mlat {
     /// the fixes' geometry sees it, for aircraft without a better one.
     geometric_baro: GeometricBaros,
     pub stats: MlatStats,
-    /// The last group too small for a fix, for the tracker ([`Mlat::take_tdoa`]).
-    tdoa: Option<TdoaGroup>,
 }
 
 impl Mlat {
@@ -385,11 +439,6 @@ impl Mlat {
         Some((epoch_ns as f64 * 1e-9 + t, var))
     }
 
-    /// The time differences of the last group that was too small for a fix.
-    pub fn take_tdoa(&mut self) -> Option<TdoaGroup> {
-        self.tdoa.take()
-    }
-
     /// What calibration learnt about receiver `rx`.
     pub fn timing(&self, rx: usize) -> TimingModel {
         self.rxs[rx].timing
@@ -410,7 +459,6 @@ impl Mlat {
             gps_epoch_ns: None,
             geometric_baro: GeometricBaros::default(),
             stats: MlatStats::default(),
-            tdoa: None,
         }
     }
 
@@ -599,18 +647,206 @@ impl Mlat {
         self.aircraft.len()
     }
 
-    /// A complete group at server time `now`.
-    pub fn on_group(&mut self, g: &Group, now: f64) -> Option<MlatFix> {
+    /// A complete group at server time `now`: a fix, time differences for
+    /// the tracker, or why neither.
+    pub fn on_group(&mut self, g: &Group, now: f64) -> GroupOutcome {
         self.stats.groups += 1;
+        let info = g.info;
+        let ForFix { copies, arrivals, all_copies } = match self.for_fix(g, now) {
+            Ok(c) => c,
+            Err(why) => return GroupOutcome::NoFix(why),
+        };
+        let ac = match self.note_aircraft(&info, now) {
+            Ok(ac) => ac,
+            Err(why) => return GroupOutcome::NoFix(why),
+        };
+        let (times, root) = self.sync.common_time(&copies, now);
+        if let (Some(a), false) = (info.adsb_ecef, info.suspect) {
+            match &all_copies {
+                None => self.survey_from(&copies, &times, a, info.adsb_sigma_m),
+                Some(all) => {
+                    let (all_times, _) = self.sync.common_time(all, now);
+                    self.survey_from(all, &all_times, a, info.adsb_sigma_m)
+                }
+            }
+        }
+        let Measured { mut ms, mut sites, mut sync_vars, sync_var, self_var, all_var } =
+            self.measurements(&copies, &times, info.addr);
+        let (baro, alt) = self.altitude_constraint(&ac, now);
+        let guess = ac.last_fix.filter(|(_, t)| (now - t).abs() < 30.0).map(|(p, _)| p);
+        let too_few = ms.len() < 3 || (ms.len() < 4 && alt.is_none());
+        // Exactly as many measurements as unknowns: the equations have two
+        // solutions (hyperboloids and the altitude's shell meet twice), both
+        // fitting perfectly, and only an earlier fix with redundancy tells
+        // which is the aircraft. Taken blindly, a fifth of the scale world's
+        // three-site fixes were the other one, kilometres off with a
+        // covariance of metres (NEES in the hundreds of thousands), and so
+        // were most of tma-busy's in its first seconds (only its GPS-timed
+        // receivers synchronised yet).
+        let ambiguous = !too_few && ms.len() + alt.is_some() as usize == 4 && guess.is_none();
+        if too_few || ambiguous {
+            return self.short_of_fix(&info, &ms, &arrivals, too_few, now);
+        }
+        let mut dropped = Dropped::new();
+        let solved = self.solve_robust(&mut ms, &mut sites, &mut sync_vars, &mut dropped, alt, guess);
+        let (fix, judged) = match solved {
+            Ok(f) => f,
+            Err(why) => {
+                self.reject(why);
+                return GroupOutcome::NoFix(NoFix::Rejected(why));
+            }
+        };
+        // Hedged against late copies, judged at the fix (as the robust
+        // solve already did when its last round found no outlier).
+        let judged = judged.or_else(|| (fix.dof > 0).then(|| self.judge(&ms, &sites, alt, &fix)).flatten());
+        let fix = match &judged {
+            Some(j) => super::solver::hedge(&fix, &j.at, |k| j.p_late(k)),
+            None => fix,
+        };
+        let used: smallvec::SmallVec<[usize; 8]> = sites.iter().flatten().copied().collect();
+        if !info.addr_known && fix.dof == 0 {
+            // Nothing checks an unverified address: no fix from it.
+            self.stats.unverified_address += 1;
+            return GroupOutcome::NoFix(NoFix::UnverifiedAddress);
+        }
+        if let Some(j) = judged.as_ref().filter(|_| self.cfg.calibrate && fix.dof >= 1) {
+            self.learn(j, &fix, &sites, &sync_vars, &dropped);
+        }
+        self.remember_fix(info.addr, &fix, judged.as_ref().map(|j| &j.at), (alt, baro), now);
+        self.stats.fixes += 1;
+        let t = self.emission_time(copies[root].rx, &fix, &arrivals, &ms);
+        let self_sync_share = if sync_var > 0.0 { self_var / sync_var } else { 0.0 };
+        self.stats.self_synced_fixes += (self_sync_share > 0.5) as u64;
+        GroupOutcome::Fix(Box::new(MlatFix {
+            addr: info.addr,
+            t,
+            lat: fix.lat,
+            lon: fix.lon,
+            alt_m: fix.h_m,
+            cov_en: fix.cov_en,
+            cov_ecef: fix.cov_ecef,
+            receivers: used,
+            gdop: fix.gdop,
+            chi2: if fix.dof > 0 { fix.chi2 / fix.dof as f64 } else { 0.0 },
+            dof: fix.dof,
+            altitude_used: alt.is_some(),
+            sync_share: if all_var > 0.0 { sync_var / all_var } else { 0.0 },
+            self_sync_share,
+            df: info.df,
+        }))
+    }
+
+    /// Notes the group's altitude and ADS-B in the aircraft's state; its
+    /// state then, or `AdsbRecent` for an ADS-B aircraft tried less than
+    /// about `adsb_interval_s` ago (transponders dither their squitters by
+    /// +/-20%, so a quarter early is allowed).
+    fn note_aircraft(&mut self, info: &GroupInfo, now: f64) -> Result<AcState, NoFix> {
+        if let Some(a) = info.alt_baro_ft {
+            self.note_altitude(info.addr, a, info.baro_correction, now);
+        }
+        if info.adsb_ecef.is_some() {
+            self.aircraft.entry(info.addr).or_default().last_adsb = Some(now);
+        }
+        let ac = self.aircraft.get(&info.addr).copied().unwrap_or_default();
+        let adsb = self.cfg.adsb_interval_s > 0.0 && ac.last_adsb.is_some_and(|t| now - t < 10.0);
+        if adsb && ac.last_tried.is_some_and(|t| now - t < 0.75 * self.cfg.adsb_interval_s) {
+            self.stats.adsb_skipped += 1;
+            return Err(NoFix::AdsbRecent);
+        }
+        Ok(ac)
+    }
+
+    /// Too few measurements for a fix (`too_few`), or too few to choose
+    /// between its two solutions: counted, and the synchronised times handed
+    /// to the tracker as time differences when a track that already knows
+    /// where the aircraft is can use them.
+    fn short_of_fix(
+        &mut self,
+        info: &GroupInfo,
+        ms: &[Measurement],
+        arrivals: &[f64],
+        too_few: bool,
+        now: f64,
+    ) -> GroupOutcome {
+        let why = if too_few {
+            self.stats.too_few_receivers += 1;
+            NoFix::TooFewReceivers
+        } else {
+            self.reject(Reject::Ambiguous);
+            self.aircraft.entry(info.addr).or_default().last_tried = Some(now);
+            NoFix::Rejected(Reject::Ambiguous)
+        };
+        if (2..=3).contains(&ms.len()) && info.addr_known {
+            let first = arrivals.iter().cloned().fold(f64::INFINITY, f64::min);
+            return GroupOutcome::Tdoa(TdoaGroup {
+                addr: info.addr,
+                t: first,
+                sites: ms.iter().map(|m| (m.pos, m.t, m.sigma_t)).collect(),
+            });
+        }
+        GroupOutcome::NoFix(why)
+    }
+
+    /// What a fix leaves in its aircraft's state: when it was tried, where
+    /// it was (with redundancy), and, now and then, what its geometry says
+    /// of the barometric altitude's difference from the ellipsoid height
+    /// (see [`GeometricBaros`]; the hedge moved neither the fix nor its
+    /// linearisation, `at`).
+    fn remember_fix(
+        &mut self,
+        addr: u32,
+        fix: &super::solver::Fix,
+        at: Option<&AtFix>,
+        (alt, baro): (Option<AltitudeConstraint>, Option<Baro>),
+        now: f64,
+    ) {
+        let ac = self.aircraft.entry(addr).or_default();
+        let look_due = ac.last_baro_look.is_none_or(|t| (now - t).abs() >= BARO_LOOK_EVERY_S);
+        if let (Some(a), Some(Baro { ft, var_m2, .. }), Some(at), true) = (alt, baro, at, look_due) {
+            if let Some((geom_m, geom_var)) = at.height_apart(fix, a) {
+                ac.last_baro_look = Some(now);
+                self.geometric_baro.observe(fix.lat, fix.lon, (geom_m, geom_var), ft, var_m2, now);
+            }
+        }
+        ac.last_tried = Some(now);
+        if fix.dof >= 1 {
+            ac.last_fix = Some((fix.ecef, now));
+        }
+    }
+
+    /// When the fix's transmission left the aircraft (Unix s): from the
+    /// solution itself on a GPS-timed root, else the first arrival less the
+    /// flight time to the nearest site.
+    fn emission_time(
+        &self,
+        root_rx: usize,
+        fix: &super::solver::Fix,
+        arrivals: &[f64],
+        ms: &[Measurement],
+    ) -> f64 {
+        match (self.rxs[root_rx].clock, self.gps_epoch_ns) {
+            (ClockKind::Gps, Some(epoch)) => epoch as f64 * 1e-9 + fix.t_emit,
+            _ => {
+                let first = arrivals.iter().cloned().fold(f64::INFINITY, f64::min);
+                let nearest = ms.iter().map(|m| ecef_distance(m.pos, fix.ecef)).fold(f64::INFINITY, f64::min);
+                first - nearest / C_AIR
+            }
+        }
+    }
+
+    /// The copies of a group fit for a fix: at least two usable ones, the
+    /// clocks synchronised from its ADS-B position when it has one, the
+    /// excluded receivers' copies left out (and kept aside for the survey).
+    fn for_fix(&mut self, g: &Group, now: f64) -> Result<ForFix, NoFix> {
         let info = g.info;
         if !info.decoded || g.copies.len() < 2 {
             self.stats.too_few_receivers += (g.copies.len() < 2) as u64;
-            return None;
+            return Err(NoFix::TooFewReceivers);
         }
         let (mut copies, mut arrivals) = self.usable_copies(g);
         if copies.len() < 2 {
             self.stats.too_few_receivers += 1;
-            return None;
+            return Err(NoFix::TooFewReceivers);
         }
         if let (Some(p), false) = (info.adsb_ecef, info.suspect) {
             if self.aircraft.get(&info.addr).is_some_and(|a| a.sync_banned) {
@@ -637,33 +873,13 @@ impl Mlat {
             }
             self.stats.excluded_receiver_copies += (before - copies.len()) as u64;
         }
-        if let Some(a) = info.alt_baro_ft {
-            self.note_altitude(info.addr, a, info.baro_correction, now);
-        }
-        if info.adsb_ecef.is_some() {
-            self.aircraft.entry(info.addr).or_default().last_adsb = Some(now);
-        }
-        let ac = self.aircraft.get(&info.addr).copied().unwrap_or_default();
-        if self.cfg.adsb_interval_s > 0.0 && ac.last_adsb.is_some_and(|t| now - t < 10.0) {
-            // An ADS-B aircraft: about every `adsb_interval_s` (transponders
-            // dither their squitters by +/-20%, so allow a quarter early).
-            if ac.last_tried.is_some_and(|t| now - t < 0.75 * self.cfg.adsb_interval_s) {
-                self.stats.adsb_skipped += 1;
-                return None;
-            }
-        }
-        let (times, root) = self.sync.common_time(&copies, now);
-        if let (Some(a), false) = (info.adsb_ecef, info.suspect) {
-            match &all_copies {
-                None => self.survey_from(&copies, &times, a, info.adsb_sigma_m),
-                Some(all) => {
-                    let (all_times, _) = self.sync.common_time(all, now);
-                    self.survey_from(all, &all_times, a, info.adsb_sigma_m)
-                }
-            }
-        }
-        let Measured { mut ms, mut sites, mut sync_vars, sync_var, self_var, all_var } =
-            self.measurements(&copies, &times, info.addr);
+        Ok(ForFix { copies, arrivals, all_copies })
+    }
+
+    /// The aircraft's barometric altitude when recent enough to constrain a
+    /// fix, and the constraint it makes: its height above the ellipsoid and
+    /// sigma.
+    fn altitude_constraint(&self, ac: &AcState, now: f64) -> (Option<Baro>, Option<AltitudeConstraint>) {
         // The barometric altitude's own height and variance (25 ft steps,
         // climb since), apart from its correction to the ellipsoid, when
         // recent enough to constrain the fix.
@@ -671,9 +887,9 @@ impl Mlat {
             let age = (now - t).abs();
             let quant = 25.0 * FT_TO_M / 12f64.sqrt();
             let var = quant.powi(2) + (age * self.cfg.alt_growth_mps).powi(2);
-            (age <= self.cfg.max_alt_age_s).then_some((ft, var, diff))
+            (age <= self.cfg.max_alt_age_s).then_some(Baro { ft, var_m2: var, correction: diff })
         });
-        let alt = baro.map(|(ft, var, diff)| {
+        let alt = baro.map(|Baro { ft, var_m2: var, correction: diff }| {
             // The correction is the aircraft's own when its ADS-B reports
             // one (GNSS minus baro, in 25 ft steps), else the region's from
             // the ADS-B traffic, else from the fixes' geometry: taken as zero
@@ -687,106 +903,7 @@ impl Mlat {
             let (h_m, correction) = baro_height(ft, diff, self.cfg.baro_sigma_m);
             AltitudeConstraint { h_m, sigma_m: (var + correction.powi(2)).sqrt() }
         });
-        let guess = ac.last_fix.filter(|(_, t)| (now - t).abs() < 30.0).map(|(p, _)| p);
-        let too_few = ms.len() < 3 || (ms.len() < 4 && alt.is_none());
-        // Exactly as many measurements as unknowns: the equations have two
-        // solutions (hyperboloids and the altitude's shell meet twice), both
-        // fitting perfectly, and only an earlier fix with redundancy tells
-        // which is the aircraft. Taken blindly, a fifth of the scale world's
-        // three-site fixes were the other one, kilometres off with a
-        // covariance of metres (NEES in the hundreds of thousands), and so
-        // were most of tma-busy's in its first seconds (only its GPS-timed
-        // receivers synchronised yet).
-        let ambiguous = !too_few && ms.len() + alt.is_some() as usize == 4 && guess.is_none();
-        if too_few || ambiguous {
-            if too_few {
-                self.stats.too_few_receivers += 1;
-            } else {
-                self.reject(Reject::Ambiguous);
-                self.aircraft.entry(info.addr).or_default().last_tried = Some(now);
-            }
-            // Too few for a fix, or too few to choose one, but enough for a
-            // track that already knows where the aircraft is: the
-            // synchronised times go to the tracker as time differences.
-            if (2..=3).contains(&ms.len()) && info.addr_known {
-                let first = arrivals.iter().cloned().fold(f64::INFINITY, f64::min);
-                self.tdoa = Some(TdoaGroup {
-                    addr: info.addr,
-                    t: first,
-                    sites: ms.iter().map(|m| (m.pos, m.t, m.sigma_t)).collect(),
-                });
-            }
-            return None;
-        }
-        let mut dropped = Dropped::new();
-        let solved = self.solve_robust(&mut ms, &mut sites, &mut sync_vars, &mut dropped, alt, guess);
-        let (fix, judged) = match solved {
-            Ok(f) => f,
-            Err(why) => {
-                self.reject(why);
-                return None;
-            }
-        };
-        // Hedged against late copies, judged at the fix (as the robust
-        // solve already did when its last round found no outlier).
-        let judged = judged.or_else(|| (fix.dof > 0).then(|| self.judge(&ms, &sites, alt, &fix)).flatten());
-        let fix = match &judged {
-            Some(j) => super::solver::hedge(&fix, &j.at, |k| j.p_late(k)),
-            None => fix,
-        };
-        let used: smallvec::SmallVec<[usize; 8]> = sites.iter().flatten().copied().collect();
-        if !info.addr_known && fix.dof == 0 {
-            // Nothing checks an unverified address: no fix from it.
-            self.stats.unverified_address += 1;
-            return None;
-        }
-        if let Some(j) = judged.as_ref().filter(|_| self.cfg.calibrate && fix.dof >= 1) {
-            self.learn(j, &fix, &sites, &sync_vars, &dropped);
-        }
-        let ac = self.aircraft.entry(info.addr).or_default();
-        // What the fix's geometry says of the barometric altitude's
-        // difference from the ellipsoid height (see [`GeometricBaro`]); the
-        // hedge moved neither the fix nor its linearisation.
-        let look_due = ac.last_baro_look.is_none_or(|t| (now - t).abs() >= BARO_LOOK_EVERY_S);
-        if let (Some(a), Some((ft, var, _)), Some(j), true) = (alt, baro, &judged, look_due) {
-            if let Some((geom_m, geom_var)) = j.at.height_apart(&fix, a) {
-                ac.last_baro_look = Some(now);
-                self.geometric_baro.observe(fix.lat, fix.lon, (geom_m, geom_var), ft, var, now);
-            }
-        }
-        ac.last_tried = Some(now);
-        if fix.dof >= 1 {
-            ac.last_fix = Some((fix.ecef, now));
-        }
-        self.stats.fixes += 1;
-        let root_rx = copies[root].rx;
-        let t = match (self.rxs[root_rx].clock, self.gps_epoch_ns) {
-            (ClockKind::Gps, Some(epoch)) => epoch as f64 * 1e-9 + fix.t_emit,
-            _ => {
-                let first = arrivals.iter().cloned().fold(f64::INFINITY, f64::min);
-                let nearest = ms.iter().map(|m| ecef_distance(m.pos, fix.ecef)).fold(f64::INFINITY, f64::min);
-                first - nearest / C_AIR
-            }
-        };
-        let self_sync_share = if sync_var > 0.0 { self_var / sync_var } else { 0.0 };
-        self.stats.self_synced_fixes += (self_sync_share > 0.5) as u64;
-        Some(MlatFix {
-            addr: info.addr,
-            t,
-            lat: fix.lat,
-            lon: fix.lon,
-            alt_m: fix.h_m,
-            cov_en: fix.cov_en,
-            cov_ecef: fix.cov_ecef,
-            receivers: used,
-            gdop: fix.gdop,
-            chi2: if fix.dof > 0 { fix.chi2 / fix.dof as f64 } else { 0.0 },
-            dof: fix.dof,
-            altitude_used: alt.is_some(),
-            sync_share: if all_var > 0.0 { sync_var / all_var } else { 0.0 },
-            self_sync_share,
-            df: info.df,
-        })
+        (baro, alt)
     }
 
     /// A group's usable copies on their receivers' local time, with their
@@ -1256,7 +1373,7 @@ mod tests {
     fn a_clean_group_gives_an_accurate_fix() {
         let (mut m, rxs) = engine();
         let target = geodetic_to_ecef(48.75, 2.40, 30_000.0 * FT_TO_M);
-        let f = m.on_group(&group(&rxs, target, 1_700_000_000.0), 1_700_000_000.2).expect("fix");
+        let f = m.on_group(&group(&rxs, target, 1_700_000_000.0), 1_700_000_000.2).fix().expect("fix");
         assert!(crate::geo::distance_m(f.lat, f.lon, 48.75, 2.40) < 1.0, "{f:?}");
         assert!((f.t - 1_700_000_000.0).abs() < 1e-6, "emission time from GPS: {}", f.t);
         assert_eq!(f.receivers.len(), 5);
@@ -1274,7 +1391,7 @@ mod tests {
             let t = 1_700_000_000.0;
             let mut g = group(&rxs[..4], target, t);
             g.info.baro_correction = diff.map(BaroCorrection::own);
-            let f = m.on_group(&g, t + 0.2).expect("fix");
+            let f = m.on_group(&g, t + 0.2).fix().expect("fix");
             (crate::geo::distance_m(f.lat, f.lon, lat, lon), f.cov_en[0][0] + f.cov_en[1][1])
         };
         let (with, with_var) = miss(Some(200));
@@ -1294,16 +1411,20 @@ mod tests {
         let (mut m, rxs) = engine();
         let target = geodetic_to_ecef(48.75, 2.40, 30_000.0 * FT_TO_M);
         let t = 1_700_000_000.0;
-        assert!(m.on_group(&group(&rxs[..3], target, t), t + 0.2).is_none());
+        // No fix, but the time differences for a track that knows where it is.
+        match m.on_group(&group(&rxs[..3], target, t), t + 0.2) {
+            GroupOutcome::Tdoa(g) => assert_eq!(g.sites.len(), 3),
+            other => panic!("{other:?}"),
+        }
         assert_eq!(m.stats.rejects.get(Reject::Ambiguous), 1);
-        assert_eq!(m.take_tdoa().map(|g| g.sites.len()), Some(3));
-        m.on_group(&group(&rxs, target, t + 1.0), t + 1.2).expect("a redundant fix");
-        let f = m.on_group(&group(&rxs[..3], target, t + 2.0), t + 2.2).expect("chosen by the earlier fix");
+        m.on_group(&group(&rxs, target, t + 1.0), t + 1.2).fix().expect("a redundant fix");
+        let f =
+            m.on_group(&group(&rxs[..3], target, t + 2.0), t + 2.2).fix().expect("chosen by the earlier fix");
         assert_eq!(f.dof, 0);
         assert!(crate::geo::distance_m(f.lat, f.lon, 48.75, 2.40) < 1.0, "{f:?}");
         let mut g = group(&rxs[..3], target, t + 3.0);
         g.info.addr_known = false;
-        assert!(m.on_group(&g, t + 3.2).is_none());
+        assert!(m.on_group(&g, t + 3.2).fix().is_none());
         assert_eq!((m.stats.unverified_address, m.stats.fixes), (1, 2));
     }
 
@@ -1323,10 +1444,10 @@ mod tests {
             delay(&mut g.copies[1], 0.6e-6);
             g
         };
-        assert!(m.on_group(&late(t), t + 0.2).is_none());
+        assert!(m.on_group(&late(t), t + 0.2).fix().is_none());
         assert_eq!(m.stats.rejects.get(Reject::Residual), 1);
-        m.on_group(&group(&rxs, target, t + 1.0), t + 1.2).expect("a redundant fix");
-        let f = m.on_group(&late(t + 2.0), t + 2.2).expect("anchored by the earlier fix");
+        m.on_group(&group(&rxs, target, t + 1.0), t + 1.2).fix().expect("a redundant fix");
+        let f = m.on_group(&late(t + 2.0), t + 2.2).fix().expect("anchored by the earlier fix");
         let plain = super::super::solver::chi2_quantile(1, 0.999);
         eprintln!("chi2 {} against {plain}", f.chi2);
         assert!(f.dof == 1 && f.chi2 > plain, "{f:?}");
@@ -1342,23 +1463,23 @@ mod tests {
         g.copies[0].rx = 99;
         g.copies[1].timestamp = 0;
         g.copies[2].timestamp = crate::feed::MLAT_MAGIC_TIMESTAMP;
-        assert!(m.on_group(&g, t).is_none());
+        assert!(m.on_group(&g, t).fix().is_none());
         assert_eq!((m.stats.unknown_receiver, m.stats.no_timing), (1, 2));
         // Inconsistent geometry: one copy 3 microseconds late is rejected, not fixed.
         let mut g = group(&rxs, target, t + 1.0);
         g.copies[3].timestamp =
             ClockKind::gps_timestamp(ClockKind::gps_unix(g.copies[3].timestamp, t) + 3e-6);
-        assert!(m.on_group(&g, t + 1.0).is_none());
+        assert!(m.on_group(&g, t + 1.0).fix().is_none());
         assert_eq!(m.stats.rejects.get(Reject::Residual), 1);
         // An address nothing verified, exactly determined: no fix (with no
         // earlier fix to choose its solution, it is ambiguous first).
         let mut g = group(&rxs[..3], target, t + 2.0);
         g.info.addr_known = false;
-        assert!(m.on_group(&g, t + 2.0).is_none());
+        assert!(m.on_group(&g, t + 2.0).fix().is_none());
         assert_eq!(m.stats.rejects.get(Reject::Ambiguous), 1);
         // Two copies only: too few.
         let g = group(&rxs[..2], target, t + 3.0);
-        assert!(m.on_group(&g, t + 3.0).is_none());
+        assert!(m.on_group(&g, t + 3.0).fix().is_none());
         assert!(m.stats.too_few_receivers >= 1);
         assert_eq!(m.stats.fixes, 0);
     }
@@ -1385,7 +1506,7 @@ mod tests {
             for (i, c) in g.copies.iter_mut().enumerate() {
                 delay(c, 1e-6 + noise.sample(&mut rng) + if i == 2 { 150e-9 } else { 0.0 });
             }
-            m.on_group(&g, t + 0.2).is_some()
+            m.on_group(&g, t + 0.2).fix().is_some()
         };
         for k in 0..25 {
             assert!(fix(&mut m, k));
@@ -1424,7 +1545,7 @@ mod tests {
         let t = 1_700_000_000.0;
         let mut g = group(&rxs, target, t);
         delay(&mut g.copies[3], 3e-6);
-        let f = m.on_group(&g, t).expect("fix from the six good copies");
+        let f = m.on_group(&g, t).fix().expect("fix from the six good copies");
         assert_eq!(m.stats.outliers_dropped, 1);
         assert!(!f.receivers.contains(&3), "the bad copy is not in the fix");
         assert!(crate::geo::distance_m(f.lat, f.lon, 48.75, 2.40) < 5.0);
@@ -1449,7 +1570,7 @@ mod tests {
     fn receivers_at_one_site_count_once() {
         let (mut m, rxs) = with_neighbour(5.0);
         let target = geodetic_to_ecef(48.75, 2.40, 30_000.0 * FT_TO_M);
-        let f = m.on_group(&group(&rxs, target, 1_700_000_000.0), 1_700_000_000.2).expect("fix");
+        let f = m.on_group(&group(&rxs, target, 1_700_000_000.0), 1_700_000_000.2).fix().expect("fix");
         assert_eq!(m.stats.close_receivers, 1);
         assert_eq!(f.receivers.len(), 6, "both receivers of the site are credited");
         assert_eq!(f.dof, 2, "but they make one measurement: 5 sites + altitude - 4 unknowns");
@@ -1461,7 +1582,7 @@ mod tests {
         // at one of them would turn into hundreds of metres of error.
         let (mut m, rxs) = with_neighbour(700.0);
         let target = geodetic_to_ecef(48.75, 2.40, 30_000.0 * FT_TO_M);
-        let f = m.on_group(&group(&rxs, target, 1_700_000_000.0), 1_700_000_000.2).expect("fix");
+        let f = m.on_group(&group(&rxs, target, 1_700_000_000.0), 1_700_000_000.2).fix().expect("fix");
         assert_eq!(m.stats.close_receivers, 0);
         assert_eq!(f.dof, 3, "6 sites + altitude - 4 unknowns");
         assert!(crate::geo::distance_m(f.lat, f.lon, 48.75, 2.40) < 5.0);
@@ -1511,7 +1632,7 @@ mod tests {
             if !out && excluded_at.is_some() && readmitted_at.is_none() {
                 readmitted_at = Some(k);
             }
-            if let Some(f) = fix {
+            if let Some(f) = fix.fix() {
                 last_fix_used_it = f.receivers.contains(&5);
             }
         }
