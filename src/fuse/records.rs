@@ -1,0 +1,119 @@
+//! What the fusion stage hands out: published track states and alerts,
+//! and its counters.
+
+use std::sync::Arc;
+
+use crate::track::motion::Motion;
+use crate::track::Estimate;
+
+/// What the fusion stage emits.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Output {
+    Track(Box<TrackReport>),
+    Alert(Alert),
+}
+
+/// A change worth telling subscribers (contract `type: "alert"`).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Alert {
+    /// The timing contradicts (or again confirms) an aircraft's ADS-B positions.
+    AdsbSuspect { t: f64, addr: u32, id: u64, suspect: bool, offset_m: f64, nis: f64 },
+    /// A predicted conflict starts (or ends) between two tracks.
+    Conflict { t: f64, pair: [(u32, u64); 2], active: bool, tau_s: f64, t_cpa_s: f64, miss_m: f64, dz_m: f64 },
+}
+
+/// The sources that fed a track lately, by name; inline (a heap list per
+/// published track was measurable).
+pub type Sources = smallvec::SmallVec<[&'static str; 2]>;
+
+/// A published track state (contract `type: "track"`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrackReport {
+    pub id: u64,
+    pub addr: u32,
+    pub source: &'static str,
+    pub est: Estimate,
+    pub alt_baro_ft: Option<i32>,
+    pub sources: Sources,
+    pub nac_p: Option<u8>,
+    pub period_s: f64,
+    pub motion: Motion,
+    pub adsb_suspect: bool,
+    /// Shared with the aircraft: a copy per publication was an allocation.
+    pub flight: Option<Arc<str>>,
+    pub squawk: Option<u16>,
+    /// Age (s) of the newest ADS-B and MLAT measurement, when recent.
+    pub ages_s: [Option<f64>; 2],
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FuseStats {
+    pub measurements: u64,
+    pub rejected_non_finite: u64,
+    pub rejected_speed: u64,
+    pub rejected_time: u64,
+    pub too_late: u64,
+    /// Measurements older than one the fused track already had, put in
+    /// their place by re-running the newer ones (the MLAT hold keeps these rare).
+    pub reruns: u64,
+    pub gated: u64,
+    pub restarts: u64,
+    pub table_full: u64,
+    pub tracks_created: u64,
+    pub tracks_dropped: u64,
+    pub published: u64,
+    /// Fusion of two tracks impossible (a covariance not positive definite,
+    /// or one track's newest position older than the coasting limit): the
+    /// better single track published, once per publication.
+    pub fusion_fallbacks: u64,
+    /// Conformance flags raised (the monitor itself runs in the core's
+    /// front stage, which also keeps flagged ADS-B out of clock sync).
+    pub suspect_flags: u64,
+    /// ADS-B measurements of flagged aircraft kept out of their fused track.
+    pub suspect_excluded: u64,
+    /// Groups too small for a fix given to tracks as time differences.
+    pub tdoa: u64,
+    pub conflicts: u64,
+}
+
+/// One line for people (the offline run's report): what came in, what was
+/// turned away and why, what went out.
+impl std::fmt::Display for FuseStats {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let rejected: Vec<String> =
+            self.rejected().iter().filter(|(_, n)| *n > 0).map(|(k, n)| format!("{k}={n}")).collect();
+        write!(
+            f,
+            "{} measurements, rejected [{}], gated {}, re-run {}; tracks {} created, {} dropped, \
+             {} restarts; {} published, fusion fallbacks {}; ADS-B suspect flags {} ({} positions kept out); \
+             TDOA updates {}; conflicts {}",
+            self.measurements,
+            rejected.join(" "),
+            self.gated,
+            self.reruns,
+            self.tracks_created,
+            self.tracks_dropped,
+            self.restarts,
+            self.published,
+            self.fusion_fallbacks,
+            self.suspect_flags,
+            self.suspect_excluded,
+            self.tdoa,
+            self.conflicts
+        )
+    }
+}
+
+impl FuseStats {
+    /// The measurements turned away as bad input, by reason: what the
+    /// service exports and sums in its stats line.
+    pub fn rejected(&self) -> [(&'static str, u64); 5] {
+        [
+            ("non_finite", self.rejected_non_finite),
+            ("speed", self.rejected_speed),
+            ("time", self.rejected_time),
+            ("too_late", self.too_late),
+            ("table_full", self.table_full),
+        ]
+    }
+}

@@ -1,0 +1,327 @@
+//! The fusion stage's unit tests: rejection, the MLAT hold, fusion and publication.
+
+use super::*;
+
+pub(super) fn pos(t: f64, lat: f64, lon: f64) -> Measurement {
+    Measurement {
+        t,
+        source: Source::Adsb,
+        obs: Observation::Position {
+            lat,
+            lon,
+            cov_en: Matrix2::identity() * 100.0,
+            height: Some((3000.0, 100.0)),
+            time_sigma_s: 0.0,
+            surface: false,
+            claimed: true,
+        },
+    }
+}
+
+/// Where the test flight is at `t`: east at 200 m/s from (45, 5) at 3 km,
+/// from t = 100 s.
+fn at(t: f64) -> (f64, f64, f64) {
+    crate::geo::displace(45.0, 5.0, 3000.0, [200.0 * (t - 100.0), 0.0, 0.0])
+}
+
+/// An MLAT fix of the test flight at `t`, exact.
+fn fix(t: f64) -> Measurement {
+    let (lat, lon, _) = at(t);
+    Measurement { source: Source::Mlat, ..pos(t, lat, lon) }
+}
+
+#[test]
+fn impossible_measurements_are_rejected_and_counted() {
+    let mut f = Fuser::new(FuseConfig::default(), TrackConfig::default(), false);
+    let mut out = Vec::new();
+    f.on_measurement(1, Some(8), pos(100.0, f64::NAN, 5.0), 100.0, &mut out);
+    f.on_measurement(1, Some(8), pos(100.0, 45.0, 5.0), 200.0, &mut out);
+    let fast = Measurement {
+        t: 100.0,
+        source: Source::Adsb,
+        obs: Observation::Velocity { v_en: Vector2::new(1300.0, 0.0), cov: Matrix2::identity(), climb: None },
+    };
+    f.on_measurement(1, Some(8), fast, 100.0, &mut out);
+    let bad_cov = Measurement {
+        obs: Observation::Position {
+            lat: 45.0,
+            lon: 5.0,
+            cov_en: -Matrix2::identity(),
+            height: None,
+            time_sigma_s: 0.0,
+            surface: false,
+            claimed: true,
+        },
+        ..pos(100.0, 45.0, 5.0)
+    };
+    f.on_measurement(1, Some(8), bad_cov, 100.0, &mut out);
+    let s = f.stats();
+    assert_eq!((s.rejected_non_finite, s.rejected_time, s.rejected_speed), (2, 1, 1));
+    assert_eq!(f.tracks(), 0);
+    assert!(out.is_empty());
+    // Good ones make a confirmed, published track.
+    for k in 0..5 {
+        let t = 100.0 + k as f64;
+        let (lat, lon, _) = at(t);
+        f.on_measurement(1, Some(8), pos(t, lat, lon), t, &mut out);
+    }
+    assert!(out.iter().any(|o| matches!(o, Output::Track(r) if r.est.state.healthy())));
+}
+
+/// An aircraft flying east at 200 m/s for a minute: ADS-B positions at
+/// 2 Hz on time, an MLAT fix a second (for the first `mlat_s` seconds)
+/// arriving 0.5 s after its time; the core moves time forward before
+/// each arrival. Returns each publication's (arrival time, track time)
+/// and the stats.
+fn mlat_fed_flight(hold_s: f64, mlat_s: f64) -> (Vec<(f64, f64)>, FuseStats) {
+    let cfg = FuseConfig { mlat_hold_s: hold_s, ..FuseConfig::default() };
+    let (published, stats) = flight(cfg, false, mlat_s);
+    (published.iter().map(|(now, r)| (*now, r.est.t)).collect(), stats)
+}
+
+/// The flight of [`mlat_fed_flight`] through a fuser of `cfg`: every
+/// track record with its arrival time, and the stats.
+fn flight(cfg: FuseConfig, source_tracks: bool, mlat_s: f64) -> (Vec<(f64, TrackReport)>, FuseStats) {
+    let mut f = Fuser::new(cfg, TrackConfig::default(), source_tracks);
+    let mut arrivals: Vec<(f64, Measurement)> = Vec::new();
+    for k in 0..120 {
+        let t = 100.0 + 0.5 * k as f64;
+        let (lat, lon, _) = at(t);
+        arrivals.push((t, pos(t, lat, lon)));
+        if k % 2 == 1 && t < 100.0 + mlat_s {
+            let tf = t + 0.25;
+            let (lat, lon, _) = at(tf);
+            arrivals.push((tf + 0.5, Measurement { source: Source::Mlat, ..pos(tf, lat, lon) }));
+        }
+    }
+    arrivals.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let (mut out, mut published) = (Vec::new(), Vec::new());
+    let mut collect = |out: &mut Vec<Output>, now: f64| {
+        for o in out.drain(..) {
+            if let Output::Track(r) = o {
+                published.push((now, *r));
+            }
+        }
+    };
+    for (now, m) in arrivals {
+        f.advance(now, &mut out);
+        f.on_measurement(1, Some(8), m, now, &mut out);
+        collect(&mut out, now);
+    }
+    f.finish(&mut out);
+    collect(&mut out, f64::INFINITY);
+    (published, *f.stats())
+}
+
+/// The fused records of an aircraft flying straight (east at 200 m/s)
+/// for five minutes, multilaterated as by a sparse network: 150 m per
+/// axis every 0.7 s, each fix arriving 0.5 s after its time; with one
+/// ADS-B position first when `adsb_first`, its ADS-B then flagged as
+/// suspect when `suspect`.
+fn multilaterated(mlat_only: bool, seed: u64, adsb_first: bool, suspect: bool) -> Vec<TrackReport> {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let mut tcfg = TrackConfig::default();
+    tcfg.mlat_only.enabled = mlat_only;
+    let mut f = Fuser::new(FuseConfig::default(), tcfg, false);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let noise = Normal::new(0.0, 150.0).expect("sigma");
+    let mut out = Vec::new();
+    if adsb_first {
+        let (lat, lon, _) = at(100.0);
+        f.on_measurement(1, Some(8), pos(100.0, lat, lon), 100.0, &mut out);
+        if suspect {
+            f.set_suspect(1, 100.0, true, 2000.0, 100.0, &mut out);
+        }
+    }
+    for k in 1..430 {
+        let t = 100.0 + 0.7 * k as f64;
+        let e = [noise.sample(&mut rng), noise.sample(&mut rng), 0.0];
+        let (lat, lon, h) = at(t);
+        let (lat, lon, _) = crate::geo::displace(lat, lon, h, e);
+        let m = Measurement {
+            source: Source::Mlat,
+            obs: Observation::Position {
+                lat,
+                lon,
+                cov_en: Matrix2::identity() * 150.0f64.powi(2),
+                height: Some((3000.0, 100.0)),
+                time_sigma_s: 0.0,
+                surface: false,
+                claimed: true,
+            },
+            ..pos(t, lat, lon)
+        };
+        f.advance(t + 0.5, &mut out);
+        f.on_measurement(1, None, m, t + 0.5, &mut out);
+    }
+    f.finish(&mut out);
+    out.into_iter()
+        .filter_map(|o| match o {
+            Output::Track(r) if r.source == "fused" => Some(*r),
+            _ => None,
+        })
+        .collect()
+}
+
+/// An aircraft heard only through MLAT, hundreds of metres per fix, flying
+/// straight: with the matrix that keeps to constant velocity its track
+/// is closer to the truth than with the matrix of ADS-B aircraft, whose
+/// manoeuvre models then keep three quarters of the weight, and its
+/// covariance still covers the error (straight flight is where an IMM
+/// is most conservative: both are). So does one whose ADS-B is kept out
+/// as suspect; an aircraft heard in ADS-B switches like any other.
+#[test]
+fn an_aircraft_heard_only_by_mlat_keeps_to_constant_velocity() {
+    // RMS error and mean NEES after the first 30 s, over 20 runs.
+    let score = |mlat_only: bool, suspect: bool| {
+        let (mut se, mut nees, mut n) = (0.0, 0.0, 0usize);
+        for seed in 1..=20 {
+            let records = multilaterated(mlat_only, seed, suspect, suspect);
+            for r in records.iter().filter(|r| r.est.t > 130.0) {
+                let (lat, lon, _) = at(r.est.t);
+                let plane = Plane::new(lat, lon, 3000.0);
+                let d = Vector2::from(plane.to_en(r.est.lat, r.est.lon));
+                let c = Matrix2::from_fn(|i, j| r.est.cov_local[i][j]);
+                se += d.norm_squared();
+                nees += d.dot(&(c.try_inverse().expect("covariance") * d));
+                n += 1;
+            }
+        }
+        ((se / n as f64).sqrt(), nees / n as f64)
+    };
+    let (rmse_home, nees_home) = score(true, false);
+    let (rmse_sticky, nees_sticky) = score(false, false);
+    eprintln!("MLAT only: {rmse_home:.1} m NEES {nees_home:.2}; as ADS-B aircraft: {rmse_sticky:.1} m NEES {nees_sticky:.2}");
+    assert!(rmse_home < 0.8 * rmse_sticky, "{rmse_home} against {rmse_sticky}");
+    assert!(nees_home > 1.2 && nees_home < 2.0, "{nees_home}");
+    let (rmse_suspect, _) = score(true, true);
+    let (rmse_suspect_sticky, _) = score(false, true);
+    eprintln!("flagged as suspect: {rmse_suspect:.1} m; as ADS-B aircraft: {rmse_suspect_sticky:.1} m");
+    assert!(rmse_suspect < 0.8 * rmse_suspect_sticky, "{rmse_suspect} against {rmse_suspect_sticky}");
+    // Heard in ADS-B first: the same records whichever matrix MLAT-only
+    // aircraft would have.
+    assert_eq!(multilaterated(true, 1, true, false), multilaterated(false, 1, true, false));
+}
+
+/// Track-to-track fusion of a pair too far apart in time: once the MLAT
+/// track's newest fix is older than the coasting limit, the fresh ADS-B
+/// track goes out as it is, and each such publication is counted until
+/// the MLAT source leaves the sources window.
+#[test]
+fn a_pair_too_far_apart_to_align_is_not_fused_and_is_counted() {
+    let cfg = FuseConfig { method: Method::Convex, ..FuseConfig::default() };
+    let (coast, window) = (TrackConfig::default().coast_after_s, cfg.sources_window_s);
+    let (published, stats) = flight(cfg, true, 20.0);
+    let last_fix = 100.0 + 19.5 + 0.25;
+    // Fused and ADS-B records of the same publication, by track time.
+    let pairs: Vec<(f64, &TrackReport, &TrackReport)> = published
+        .iter()
+        .filter(|(_, r)| r.source == "fused")
+        .filter_map(|(_, fused)| {
+            let adsb = published.iter().find(|(_, r)| r.source == "adsb" && r.est.t == fused.est.t)?;
+            Some((fused.est.t - last_fix, fused, &adsb.1))
+        })
+        .collect();
+    let same =
+        |a: &TrackReport, b: &TrackReport| a.est.state.x == b.est.state.x && a.est.state.p == b.est.state.p;
+    // Fused while both are fresh, once the MLAT track is confirmed (its
+    // third fix, at about 102.75).
+    let fused_while_both = pairs.iter().filter(|(age, ..)| (-15.0..0.0).contains(age)).collect::<Vec<_>>();
+    assert!(fused_while_both.len() > 20 && fused_while_both.iter().all(|(_, f, a)| !same(f, a)));
+    let unaligned: Vec<_> = pairs.iter().filter(|(age, ..)| *age > coast && *age <= window).collect();
+    assert!(unaligned.len() >= 10 && unaligned.iter().all(|(_, f, a)| same(f, a)), "{}", unaligned.len());
+    assert_eq!(stats.fusion_fallbacks, unaligned.len() as u64, "{stats:?}");
+}
+
+#[test]
+fn an_mlat_fed_track_takes_late_fixes_in_order_and_keeps_its_period() {
+    let (held, stats) = mlat_fed_flight(0.6, 60.0);
+    // Only the very first fix (before the aircraft counts as MLAT-fed)
+    // lands behind newer ADS-B; without the hold every fix does.
+    assert!(stats.reruns <= 1, "{stats:?}");
+    assert!(mlat_fed_flight(0.0, 60.0).1.reruns >= 50);
+    // NACp 8: one publication per 0.6 s over the ~57 s after confirmation,
+    // each at a newer time than the last, about the hold after its time.
+    assert!((90..=100).contains(&held.len()), "{}", held.len());
+    assert!(held.windows(2).all(|w| w[1].1 > w[0].1));
+    let gaps = held.windows(2).map(|w| w[1].1 - w[0].1).sum::<f64>() / (held.len() - 1) as f64;
+    assert!((gaps - 0.6).abs() < 0.05, "mean gap {gaps}");
+    assert!(held[5..held.len() - 1].iter().all(|(now, t)| (0.5..=1.0).contains(&(now - t))), "{held:?}");
+}
+
+#[test]
+fn a_flood_of_one_mlat_fed_aircraft_is_applied_early_not_queued_without_bound() {
+    let mut f = Fuser::new(FuseConfig::default(), TrackConfig::default(), false);
+    let mut out = Vec::new();
+    f.on_measurement(1, None, fix(100.0), 100.0, &mut out);
+    // 1,000 positions within a millisecond of arrival time (a replay
+    // looping fast): none is lost, none waits beyond the bound.
+    for k in 0..1000 {
+        let t = 100.0 + 0.001 * k as f64;
+        f.on_measurement(1, None, fix(t), 100.5, &mut out);
+        assert!(f.aircraft[&1].waiting.len() <= MAX_WAITING);
+    }
+    assert_eq!(f.stats().measurements, 1001);
+    f.finish(&mut out);
+    assert!(f.aircraft[&1].waiting.is_empty());
+    assert_eq!(f.aircraft[&1].fused.t(), 100.999);
+}
+
+/// A release that moves the tracks on by more than their reorder window
+/// after the publication time (a burst delivered at once: a stalled
+/// input catching up, the end of a capture) still publishes at that
+/// time, where the tracks' history no longer reaches back to it: the
+/// fused track by measurement fusion, and the single-source tracks, by
+/// themselves and fused track to track.
+#[test]
+fn a_release_longer_than_the_reorder_window_still_publishes() {
+    for (method, source_tracks) in
+        [(Method::Measurement, false), (Method::Measurement, true), (Method::Convex, true)]
+    {
+        let cfg = FuseConfig { method, ..FuseConfig::default() };
+        let mut f = Fuser::new(cfg, TrackConfig::default(), source_tracks);
+        let mut out = Vec::new();
+        // A confirmed MLAT-fed track, each fix released after the hold.
+        for k in 0..10 {
+            let t = 100.0 + 0.5 * k as f64;
+            f.advance(t, &mut out);
+            f.on_measurement(1, None, fix(t), t, &mut out);
+        }
+        f.advance(105.0, &mut out);
+        out.clear();
+        // A fix due for publication, then five seconds of Mode S
+        // altitudes (they move the tracks on, and publish nothing), all
+        // held together and released at the end of the input.
+        let burst = 106.0;
+        f.on_measurement(1, None, fix(burst), burst, &mut out);
+        for k in 1..=10 {
+            let t = burst + 0.5 * k as f64;
+            let height =
+                Measurement { t, source: Source::Mlat, obs: Observation::Height { h: 3000.0, var: 100.0 } };
+            f.on_measurement(1, None, height, burst, &mut out);
+        }
+        assert!(out.is_empty(), "held");
+        f.finish(&mut out);
+        let published: Vec<(&str, f64)> = out
+            .iter()
+            .filter_map(|o| if let Output::Track(r) = o { Some((r.source, r.est.t)) } else { None })
+            .collect();
+        let expected =
+            if source_tracks { vec![("fused", burst), ("mlat", burst)] } else { vec![("fused", burst)] };
+        assert_eq!(published, expected, "{method:?}");
+        let reorder = TrackConfig::default().reorder_window_s;
+        assert!(f.aircraft[&1].fused.t() > burst + reorder);
+        assert!(!source_tracks || f.aircraft[&1].single[Source::Mlat as usize].t() > burst + reorder);
+    }
+}
+
+#[test]
+fn a_track_mlat_stops_feeding_goes_out_at_once_again() {
+    // MLAT for the first 20 s; 10 s later (the sources window) the
+    // track is ADS-B only and each publication leaves on arrival.
+    let (published, _) = mlat_fed_flight(0.6, 20.0);
+    let late: Vec<&(f64, f64)> = published.iter().filter(|(_, t)| *t > 132.0).collect();
+    assert!(late.len() > 40);
+    assert!(late.iter().all(|(now, t)| now == t), "{late:?}");
+}
