@@ -19,8 +19,8 @@
 //! speeds beyond 1,200 m/s, times far from now): rejected and counted.
 //!
 //! Here: the aircraft table and the [`Fuser`] that feeds, fuses and
-//! publishes; beside it the configuration ([`config`]), what is published
-//! ([`records`]), the MLAT hold's queue ([`hold`]), the fusion methods
+//! publishes; beside it the configuration (`config.rs`), what is published
+//! (`records.rs`), the MLAT hold's queue (`hold.rs`), the fusion methods
 //! ([`methods`]), conflict prediction ([`conflict`]) and the ADS-B
 //! conformance monitor ([`conformance`]).
 

@@ -8,8 +8,10 @@
 //! `[e, n, ve, vn, ae, an]` for every model, so the IMM can mix them.
 
 pub mod config;
+pub mod estimate;
 pub mod imm;
 pub mod kf;
+pub mod measurement;
 pub mod models;
 pub mod motion;
 pub mod plane;
