@@ -1,0 +1,206 @@
+//! The robust solve and what it teaches: a group's outlying copies left
+//! out one at a time while the fix stays over-determined, the copies judged
+//! at the fix under each receiver's timing model, and the receivers' timing
+//! learnt from the judged residuals. Apart from the engine's per-group path
+//! ([`Mlat::on_group`]) so that the solve reads on its own.
+
+use super::*;
+
+impl Mlat {
+    /// Solves, leaving out each copy that is an outlier under its
+    /// receiver's timing model (late by its multipath odds, or off by more
+    /// than any core explains) while the fix stays over-determined: a
+    /// receiver glitch or a reflected path costs that copy, not the
+    /// transmission. Which copy is the outlier is only told with two or more
+    /// degrees of freedom. What remains is rejected only when it has no
+    /// consistent subset (see [`Mlat::consistent`]); otherwise the solver's
+    /// covariance grows with the residuals. Returns the fix, its copies
+    /// judged when the last round did so at the fix, and the copies left out
+    /// in `dropped` (measurement, its site, its sync variance).
+    pub(super) fn solve_robust(
+        &mut self,
+        ms: &mut GroupVec<Measurement>,
+        sites: &mut GroupVec<Site>,
+        sync_vars: &mut GroupVec<f64>,
+        dropped: &mut Dropped,
+        alt: Option<AltitudeConstraint>,
+        guess: Option<[f64; 3]>,
+    ) -> Result<(crate::mlat::solver::Fix, Option<Judged>), Reject> {
+        let open = SolverLimits { chi2_reject: false, ..self.limits };
+        let anchored = guess.is_some();
+        let mut before: Option<crate::mlat::solver::Fix> = None;
+        loop {
+            let fix = match solve(ms, alt, guess, &open) {
+                Ok(f) => f,
+                Err(why) => {
+                    return before
+                        .map_or(Err(why), |b| self.undrop(ms, sites, sync_vars, dropped, b, anchored))
+                }
+            };
+            // Without a copy the equations may have another solution that
+            // fits them, far off (with one degree of freedom left, LocaRDS's
+            // went tens of kilometres away): a fix that moved beyond the
+            // uncertainty of the one with the copy is not the same fix.
+            if let Some(b) = before.take() {
+                if !near(&b, &fix) {
+                    return self.undrop(ms, sites, sync_vars, dropped, b, anchored);
+                }
+            }
+            if fix.dof < 3 {
+                return self.consistent(fix, sites, anchored).map(|f| (f, None));
+            }
+            let Some(at) = AtFix::new(ms, alt, &fix) else {
+                return self.consistent(fix, sites, anchored).map(|f| (f, None));
+            };
+            let all = self.verdicts(&at, ms, sites);
+            let mut worst: Option<(usize, f64)> = None;
+            for (k, v) in all.iter().enumerate() {
+                if v.outlier() && worst.is_none_or(|(_, s)| v.score() > s) {
+                    worst = Some((k, v.score()));
+                }
+            }
+            let Some((k, _)) = worst else {
+                let judged = Judged::new(at, &all, sites);
+                return self.consistent(fix, sites, anchored).map(|f| (f, Some(judged)));
+            };
+            let (m, site, var) = (ms.remove(k), sites.remove(k), sync_vars.remove(k));
+            self.stats.outliers_dropped += 1;
+            dropped.push((m, site, var));
+            before = Some(fix);
+        }
+    }
+
+    /// Each copy's odds of being late at the fix (see [`Judged`]).
+    pub(super) fn judge(
+        &self,
+        ms: &[Measurement],
+        sites: &[Site],
+        alt: Option<AltitudeConstraint>,
+        fix: &crate::mlat::solver::Fix,
+    ) -> Option<Judged> {
+        let at = AtFix::new(ms, alt, fix)?;
+        let all = self.verdicts(&at, ms, sites);
+        Some(Judged::new(at, &all, sites))
+    }
+
+    /// Each copy's residual at the linearised fix judged under its (first)
+    /// receiver's timing model, with the variance the fix weighted it by.
+    fn verdicts(&self, at: &AtFix, ms: &[Measurement], sites: &[Site]) -> GroupVec<Verdict> {
+        (ms.iter().zip(sites).enumerate())
+            .map(|(k, (m, site))| {
+                let (r, h) = at.residual(k);
+                self.rxs[site[0]].timing.judge(r, h, m.sigma_t.powi(2))
+            })
+            .collect()
+    }
+
+    /// The last copy left out is put back: the fix with it stands.
+    fn undrop(
+        &mut self,
+        ms: &mut GroupVec<Measurement>,
+        sites: &mut GroupVec<Site>,
+        sync_vars: &mut GroupVec<f64>,
+        dropped: &mut Dropped,
+        fix: crate::mlat::solver::Fix,
+        anchored: bool,
+    ) -> Result<(crate::mlat::solver::Fix, Option<Judged>), Reject> {
+        if let Some((m, site, var)) = dropped.pop() {
+            self.stats.outliers_dropped -= 1;
+            ms.push(m);
+            sites.push(site);
+            sync_vars.push(var);
+        }
+        self.consistent(fix, sites, anchored).map(|f| (f, None))
+    }
+
+    /// A fix whose residuals, once the outliers are out, are beyond what
+    /// sigmas as large as its receivers' learnt ones could be explain (the
+    /// chi-square quantile, times the doubt in the least known receiver's
+    /// variance) has no consistent subset. Within it, the solver's
+    /// covariance grows with the residuals, and the receivers' sigmas with
+    /// what they learn from them.
+    ///
+    /// An aircraft's first fix (no earlier one, `anchored` false) with one
+    /// degree of freedom gets no doubt: its equations may have a second
+    /// solution kilometres off, which fits them about as badly as the
+    /// aircraft's own does when one copy is late, and only the plain
+    /// quantile tells the two apart. Taken, it became the guess the next
+    /// fixes started from, so they found it too, and a track began there.
+    fn consistent(
+        &self,
+        fix: crate::mlat::solver::Fix,
+        sites: &[Site],
+        anchored: bool,
+    ) -> Result<crate::mlat::solver::Fix, Reject> {
+        if fix.dof == 0 {
+            return Ok(fix);
+        }
+        // The doubt is at least one: below the plain quantile, no need of it.
+        let limit = crate::mlat::solver::chi2_quantile(fix.dof, self.limits.chi2_quantile);
+        if fix.chi2 <= limit {
+            return Ok(fix);
+        }
+        if !anchored && fix.dof < 2 {
+            return Err(Reject::Residual);
+        }
+        let doubt =
+            (sites.iter().flatten()).map(|&rx| self.rxs[rx].timing.variance_doubt()).fold(1.0, f64::max);
+        if fix.chi2 > limit * doubt {
+            return Err(Reject::Residual);
+        }
+        Ok(fix)
+    }
+
+    /// Self-calibration: each copy's residual teaches its receiver's timing
+    /// model (see [`TimingModel::learn`]), those in the fix with their
+    /// leverage and verdict at the fix (`judged`, per site), those left out
+    /// against the fix of the others. A bias
+    /// common to all receivers is absorbed by the emission time, so only
+    /// relative offsets are learnt, which is all the solver needs.
+    pub(super) fn learn(
+        &mut self,
+        judged: &Judged,
+        fix: &crate::mlat::solver::Fix,
+        sites: &[Site],
+        sync_vars: &[f64],
+        dropped: &Dropped,
+    ) {
+        let (mut moved, mut sum): (GroupVec<usize>, f64) = (GroupVec::new(), 0.0);
+        for (k, (site, &var)) in sites.iter().zip(sync_vars).enumerate() {
+            let (r, h) = judged.at.residual(k);
+            // A merged site's residual is no single receiver's (nor verdict).
+            let Some(v) = judged.verdicts[k] else { continue };
+            let rx = site[0];
+            let rx_state = &mut self.rxs[rx];
+            if h >= 0.95 || rx_state.timing_known {
+                continue;
+            }
+            // The verdict the fix was hedged with, unless the fix weighted
+            // the receiver at its floor rather than its learnt sigma.
+            sum += if rx_state.sigma() == rx_state.timing.sigma() {
+                rx_state.timing.learn_judged(r, h, v)
+            } else {
+                rx_state.timing.learn(r, h, var)
+            };
+            moved.push(rx);
+        }
+        for (m, site, var) in dropped {
+            if site.len() > 1 || self.rxs[site[0]].timing_known {
+                continue;
+            }
+            let r = m.t - fix.t_emit - ecef_distance(m.pos, fix.ecef) / C_AIR;
+            sum += self.rxs[site[0]].timing.learn(r, 0.0, *var);
+            moved.push(site[0]);
+        }
+        // Only differences of offsets are observed: their common step is
+        // taken back, or it would wander (and the survey, which compares a
+        // receiver's raw time with the others' corrected ones, with it).
+        if !moved.is_empty() {
+            let common = sum / moved.len() as f64;
+            for &rx in &moved {
+                self.rxs[rx].timing.shift(-common);
+                self.sync.set_gps_bias(rx, self.rxs[rx].bias());
+            }
+        }
+    }
+}
