@@ -51,7 +51,7 @@ pub enum GroupOutcome {
     /// is: the time differences, for the tracker.
     Tdoa(TdoaGroup),
     /// Nothing for the tracker, and why (each reason also counted in
-    /// [`MlatStats`]).
+    /// [`MlatStats`](super::MlatStats)).
     NoFix(NoFix),
 }
 
