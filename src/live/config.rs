@@ -74,7 +74,7 @@ impl Default for ServiceConfig {
 }
 
 /// `[http]`: the map's data, readsb-compatible JSON and `/metrics` on one port.
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct HttpConfig {
     /// Where to listen (host:port). Absent: off.

@@ -323,10 +323,9 @@ async fn reload(
     }
     // Logged once the receivers are in place (tests wait for it).
     tracing::info!("SIGHUP: configuration re-read");
-    // Their ports are bound once, at start.
-    if new.http.listen != current.http.listen || new.service.metrics_listen != current.service.metrics_listen
-    {
-        tracing::warn!("SIGHUP: [http] listen and metrics_listen take effect at the next start");
+    // Their ports are bound, and the map's settings served, once, at start.
+    if new.http != current.http || new.service.metrics_listen != current.service.metrics_listen {
+        tracing::warn!("SIGHUP: [http] and metrics_listen take effect at the next start");
     }
     let (started, failed) = stream_out::start_all(&new.output, streams).await;
     for (n, e) in failed {
