@@ -25,7 +25,7 @@ use crate::mlat::engine::{baro_height, GroupOutcome};
 use crate::mlat::group::{Added, Group, GroupInfo, Grouper};
 use crate::mlat::timing::KnownTiming;
 use crate::mlat::Mlat;
-use crate::modes::nic::{nacp_epu_m, nucp_hpl_m};
+use crate::modes::nic::{nacp_epu_m, nacv_bounds, nucp_hpl_m, R95_PER_SIGMA};
 use crate::modes::{Body, Decoder, DecoderConfig, Es};
 use crate::track::{Measurement, Observation, Source};
 
@@ -512,16 +512,11 @@ impl Front {
                         return;
                     };
                     // NACv: 95% bounds of horizontal (m/s) and vertical (ft/s) velocity error.
-                    let (h95, v95_fps) = match v.nac_v {
-                        4 => (0.3, 1.5),
-                        3 => (1.0, 5.0),
-                        2 => (3.0, 15.0),
-                        1 => (10.0, 50.0),
-                        _ => (30.0, 100.0),
-                    };
+                    // Unknown: wider than NACv 1's bounds.
+                    let (h95, v95_fps) = nacv_bounds(v.nac_v).unwrap_or((30.0, 100.0));
                     // Plus the 1 kt (or 4 kt supersonic) and 64 ft/min resolution.
                     let step = if v.subtype == 2 { 4.0 } else { 1.0 } * KT_TO_MS;
-                    let hv = (h95 / 2.448f64).powi(2) + step * step / 12.0;
+                    let hv = (h95 / R95_PER_SIGMA).powi(2) + step * step / 12.0;
                     let climb = v.vrate_fpm.map(|r| {
                         let s = v95_fps * FT_TO_M / 1.96;
                         (r as f64 * FT_TO_M / 60.0, s * s + (64.0 * FT_TO_M / 60.0).powi(2) / 12.0)
@@ -583,7 +578,7 @@ impl Front {
             alt_baro_ft,
             alt_sigma_m,
             nac_p: d.nac_p,
-            sigma_m: epu.map(|e| e / 2.448),
+            sigma_m: epu.map(|e| e / R95_PER_SIGMA),
             dating,
             surface: p.surface,
             rx,

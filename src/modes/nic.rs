@@ -74,6 +74,22 @@ pub fn nuc_p(tc: u8) -> Option<u8> {
 
 const NM: f64 = 1852.0;
 
+/// A 95% horizontal radius over the per-axis sigma of the circular Gaussian
+/// it bounds (sqrt(-2 ln 0.05)): NACp's EPU and NACv's bound to sigmas.
+pub const R95_PER_SIGMA: f64 = 2.448;
+
+/// NACv's 95% bounds: horizontal velocity (m/s) and vertical rate (ft/s);
+/// `None` for 0 (unknown) and out-of-range values.
+pub fn nacv_bounds(nac_v: u8) -> Option<(f64, f64)> {
+    Some(match nac_v {
+        1 => (10.0, 50.0),
+        2 => (3.0, 15.0),
+        3 => (1.0, 5.0),
+        4 => (0.3, 1.5),
+        _ => return None,
+    })
+}
+
 /// Estimated position uncertainty (95% horizontal radius, metres) of a NACp;
 /// `None` for 0 (unknown) and out-of-range values.
 pub fn nacp_epu_m(nac_p: u8) -> Option<f64> {
@@ -128,5 +144,8 @@ mod tests {
         assert_eq!(nuc_p(11), Some(7));
         assert_eq!(nacp_epu_m(9), Some(30.0));
         assert_eq!(nacp_epu_m(0), None);
+        // DO-260B: NACv 2 is 3 m/s horizontal and 15 ft/s vertical (95%).
+        assert_eq!(nacv_bounds(2), Some((3.0, 15.0)));
+        assert_eq!((nacv_bounds(0), nacv_bounds(5)), (None, None));
     }
 }

@@ -18,7 +18,7 @@ use crate::modes::encode::{
     ac13_q, df11, df17, id13, me_airborne_position, me_identification, me_operational_status,
     me_surface_position, me_target_state, me_velocity, movement_code, surveillance_reply,
 };
-use crate::modes::nic::nacp_epu_m;
+use crate::modes::nic::{nacp_epu_m, nacv_bounds, R95_PER_SIGMA};
 
 const MS_TO_KT: f64 = 3600.0 / 1852.0;
 
@@ -63,15 +63,14 @@ pub struct Transmitter {
     rng: ChaCha8Rng,
 }
 
-/// NACv 95% bound (m/s) as a per-axis sigma.
+/// NACv 95% bound (m/s) as a per-axis sigma: unknown (0) as NACv 1, out
+/// of range as NACv 4.
 fn nacv_sigma(nac_v: u8) -> f64 {
     let bound = match nac_v {
-        0 | 1 => 10.0,
-        2 => 3.0,
-        3 => 1.0,
-        _ => 0.3,
+        0 => 10.0,
+        n => nacv_bounds(n).map_or(0.3, |(h95, _)| h95),
     };
-    bound / 2.448
+    bound / R95_PER_SIGMA
 }
 
 impl Transmitter {
@@ -105,7 +104,8 @@ impl Transmitter {
                 next: spec.start_s + rng.gen::<f64>() / hz,
             })
             .collect();
-        let sigma_m = spec.pos_sigma_m.unwrap_or_else(|| nacp_epu_m(spec.nac_p).unwrap_or(1852.0) / 2.448);
+        let sigma_m =
+            spec.pos_sigma_m.unwrap_or_else(|| nacp_epu_m(spec.nac_p).unwrap_or(1852.0) / R95_PER_SIGMA);
         let gnss = [0.0; 3].map(|_: f64| sigma_m * rng.sample::<f64, _>(StandardNormal));
         Transmitter {
             hex: spec.hex,
