@@ -107,16 +107,6 @@ struct Baro {
     correction: Option<BaroCorrection>,
 }
 
-/// A group's copies fit for a fix: on their receivers' local time, with
-/// their arrivals (server time), and every copy (excluded receivers' too)
-/// when an excluded receiver's copy was left out and the group has ADS-B
-/// to survey it with.
-struct ForFix {
-    copies: GroupVec<LocalCopy>,
-    arrivals: GroupVec<f64>,
-    all_copies: Option<GroupVec<LocalCopy>>,
-}
-
 struct Rx {
     /// Its configured id, for the log.
     id: String,
@@ -479,8 +469,15 @@ impl Mlat {
     pub fn on_group(&mut self, g: &Group, now: f64) -> GroupOutcome {
         self.stats.groups += 1;
         let info = g.info;
-        let ForFix { copies, arrivals, all_copies } = match self.for_fix(g, now) {
-            Ok(c) => c,
+        if !info.decoded || g.copies.len() < 2 {
+            self.stats.too_few_receivers += (g.copies.len() < 2) as u64;
+            return GroupOutcome::NoFix(NoFix::TooFewReceivers);
+        }
+        // Filled in place: returned, the copies (about a kilobyte inline)
+        // were moved once more per group, 1% of the pipeline's instructions.
+        let (mut copies, mut arrivals) = self.usable_copies(g);
+        let all_copies = match self.fit_for_fix(&info, &mut copies, &mut arrivals, now) {
+            Ok(all) => all,
             Err(why) => return GroupOutcome::NoFix(why),
         };
         let ac = match self.note_aircraft(&info, now) {
@@ -661,16 +658,18 @@ impl Mlat {
         }
     }
 
-    /// The copies of a group fit for a fix: at least two usable ones, the
-    /// clocks synchronised from its ADS-B position when it has one, the
-    /// excluded receivers' copies left out (and kept aside for the survey).
-    fn for_fix(&mut self, g: &Group, now: f64) -> Result<ForFix, NoFix> {
-        let info = g.info;
-        if !info.decoded || g.copies.len() < 2 {
-            self.stats.too_few_receivers += (g.copies.len() < 2) as u64;
-            return Err(NoFix::TooFewReceivers);
-        }
-        let (mut copies, mut arrivals) = self.usable_copies(g);
+    /// A group's usable copies (on their receivers' local time, with their
+    /// arrivals) made fit for a fix: at least two, the clocks synchronised
+    /// from its ADS-B position when it has one, the excluded receivers'
+    /// copies left out. Returns every copy, excluded receivers' too, when one
+    /// was left out and the group has ADS-B to survey it with (boxed: rare).
+    fn fit_for_fix(
+        &mut self,
+        info: &GroupInfo,
+        copies: &mut GroupVec<LocalCopy>,
+        arrivals: &mut GroupVec<f64>,
+        now: f64,
+    ) -> Result<Option<Box<GroupVec<LocalCopy>>>, NoFix> {
         if copies.len() < 2 {
             self.stats.too_few_receivers += 1;
             return Err(NoFix::TooFewReceivers);
@@ -679,8 +678,8 @@ impl Mlat {
             if self.aircraft.get(&info.addr).is_some_and(|a| a.sync_banned) {
                 self.stats.sync_refused += 1;
             } else {
-                let (nis_sum, judged) = self.sync_from(&copies, p, info.adsb_sigma_m, now);
-                self.sync.note_reference(&copies, info.addr);
+                let (nis_sum, judged) = self.sync_from(copies, p, info.adsb_sigma_m, now);
+                self.sync.note_reference(copies, info.addr);
                 self.judge_sync_source(info.addr, nis_sum, judged);
             }
         }
@@ -689,7 +688,7 @@ impl Mlat {
         let mut all_copies = None;
         if copies.iter().any(|c| self.out_of_fixes(c.rx)) {
             if info.adsb_ecef.is_some() && !info.suspect {
-                all_copies = Some(copies.clone());
+                all_copies = Some(Box::new(copies.clone()));
             }
             let before = copies.len();
             for k in (0..copies.len()).rev() {
@@ -700,7 +699,7 @@ impl Mlat {
             }
             self.stats.excluded_receiver_copies += (before - copies.len()) as u64;
         }
-        Ok(ForFix { copies, arrivals, all_copies })
+        Ok(all_copies)
     }
 
     /// The aircraft's barometric altitude when recent enough to constrain a
