@@ -508,47 +508,7 @@ impl Fuser {
 
     /// Pairs of confirmed tracks in predicted conflict; alerts on changes.
     fn conflicts(&mut self, now: f64, out: &mut Vec<Output>) {
-        // Each track's latest mean (no covariance: this scans thousands of
-        // tracks each time), moved to now along its velocity, then in
-        // address order: the frame's origin (and so every figure) must not
-        // depend on the hash map's order, or runs would differ.
-        let mut seen: Vec<(u32, f64, f64, crate::track::track::Kinematics)> =
-            Vec::with_capacity(self.aircraft.len());
-        for (&addr, a) in &self.aircraft {
-            // Airborne traffic only: surface movements are not TCAS encounters.
-            if a.fused.stage != Stage::Confirmed
-                || now - a.fused.last_position_t > self.tcfg.coast_after_s
-                || a.surface
-            {
-                continue;
-            }
-            let Some(k) = a.fused.kinematics() else {
-                continue;
-            };
-            let Some(alt) = k.alt_m else {
-                continue;
-            };
-            if k.vel_enu[0].hypot(k.vel_enu[1]) < MIN_CONFLICT_SPEED_MPS {
-                continue;
-            }
-            let alt_ft = a.alt_baro_ft.map_or(alt / crate::geo::FT_TO_M, f64::from);
-            seen.push((addr, alt, alt_ft, k));
-        }
-        seen.sort_unstable_by_key(|s| s.0);
-        let kin: Vec<conflict::Kinematics> = match seen.first() {
-            None => Vec::new(),
-            Some(first) => {
-                let origin = Plane::new(first.3.lat, first.3.lon, 0.0);
-                seen.iter()
-                    .map(|&(addr, alt, alt_ft, k)| {
-                        let en = origin.to_en(k.lat, k.lon);
-                        let (v, dt) = (k.vel_enu, (now - k.t).max(0.0));
-                        let pos = [en[0] + v[0] * dt, en[1] + v[1] * dt, alt + v[2] * dt];
-                        conflict::Kinematics { addr, pos, vel: v, alt_ft }
-                    })
-                    .collect()
-            }
-        };
+        let kin = self.conflict_kinematics(now);
         // An active pair keeps its alert up to a predicted miss a quarter
         // larger than the one that raises it, and until it has failed the
         // test for `clear_after_s`: pairs passing about the limit apart
@@ -601,6 +561,51 @@ impl Fuser {
             }));
         }
         self.conflicts = found;
+    }
+
+    /// What conflict prediction looks at: each airborne confirmed track's
+    /// latest mean (no covariance: this scans thousands of tracks each time),
+    /// moved to now along its velocity, in a plane at the first one, in
+    /// address order: the frame's origin (and so every figure) must not
+    /// depend on the hash map's order, or runs would differ.
+    fn conflict_kinematics(&self, now: f64) -> Vec<conflict::Kinematics> {
+        let mut seen: Vec<(u32, f64, f64, crate::track::track::Kinematics)> =
+            Vec::with_capacity(self.aircraft.len());
+        for (&addr, a) in &self.aircraft {
+            // Airborne traffic only: surface movements are not TCAS encounters.
+            if a.fused.stage != Stage::Confirmed
+                || now - a.fused.last_position_t > self.tcfg.coast_after_s
+                || a.surface
+            {
+                continue;
+            }
+            let Some(k) = a.fused.kinematics() else {
+                continue;
+            };
+            let Some(alt) = k.alt_m else {
+                continue;
+            };
+            if k.vel_enu[0].hypot(k.vel_enu[1]) < MIN_CONFLICT_SPEED_MPS {
+                continue;
+            }
+            let alt_ft = a.alt_baro_ft.map_or(alt / crate::geo::FT_TO_M, f64::from);
+            seen.push((addr, alt, alt_ft, k));
+        }
+        seen.sort_unstable_by_key(|s| s.0);
+        match seen.first() {
+            None => Vec::new(),
+            Some(first) => {
+                let origin = Plane::new(first.3.lat, first.3.lon, 0.0);
+                seen.iter()
+                    .map(|&(addr, alt, alt_ft, k)| {
+                        let en = origin.to_en(k.lat, k.lon);
+                        let (v, dt) = (k.vel_enu, (now - k.t).max(0.0));
+                        let pos = [en[0] + v[0] * dt, en[1] + v[1] * dt, alt + v[2] * dt];
+                        conflict::Kinematics { addr, pos, vel: v, alt_ft }
+                    })
+                    .collect()
+            }
+        }
     }
 
     /// Moves time to `now`: measurements whose wait is over are applied and
