@@ -619,37 +619,16 @@ impl Track {
         };
         // NaN (a degenerate innovation) is gated too.
         if nis.is_nan() || nis > self.gate {
-            self.state.gated_in_a_row += 1;
-            if self.cfg.vb {
-                // Learn from the innovation what the update cannot show, once
-                // it is clear the noise and not the track is wrong (`Pending`),
-                // and no more than an innovation on the gate would teach: one
-                // wild position must not carry the scale past the gate alone.
+            // What the innovation would teach the scale, no more than one on
+            // the gate would: one wild position must not carry the scale past
+            // the gate alone.
+            let excess = self.cfg.vb.then(|| {
                 let (nu, _) = pred.innovation(&linear(1.0));
                 let nu = nu * (self.gate / nis).sqrt().min(1.0);
                 let hph = h * pred.p * h.transpose();
-                let excess = (nom_inv * (nu * nu.transpose() - hph)).trace().max(0.0);
-                let pending = &mut self.state.pending[source as usize];
-                if pending.before_restart && self.state.accepted_since_start < self.cfg.max_gated_in_a_row {
-                    // The restart did not cure it: the measurements are noisy.
-                    pending.commit(vb);
-                }
-                pending.alpha += 1.0;
-                pending.beta += 0.5 * excess;
-            }
-            if self.state.gated_in_a_row > self.cfg.max_gated_in_a_row {
-                self.restarts += 1;
-                for (p, vb) in self.state.pending.iter_mut().zip(&mut self.state.vb) {
-                    // Failed twice in a row: not the track's fault.
-                    if p.before_restart {
-                        p.commit(vb);
-                    }
-                    p.before_restart = true;
-                }
-                self.start(lat, lon, cov_en);
-                return Outcome::Restarted;
-            }
-            return Outcome::Gated;
+                (nom_inv * (nu * nu.transpose() - hph)).trace().max(0.0)
+            });
+            return self.gated(source, excess, (lat, lon, cov_en));
         }
         self.state.gated_in_a_row = 0;
         self.state.accepted_since_start += 1;
@@ -699,6 +678,38 @@ impl Track {
                 Outcome::Restarted
             }
         }
+    }
+
+    /// A position the gate left out: what its innovation would teach the
+    /// scale (`excess`, with VB) is held back until it is clear the noise and
+    /// not the track is wrong (`Pending`), and too many in a row restart the
+    /// track on it (`at`: its position and covariance in the plane).
+    fn gated(&mut self, source: Source, excess: Option<f64>, at: (f64, f64, Matrix2<f64>)) -> Outcome {
+        self.state.gated_in_a_row += 1;
+        if let Some(excess) = excess {
+            let (pending, vb) =
+                (&mut self.state.pending[source as usize], &mut self.state.vb[source as usize]);
+            if pending.before_restart && self.state.accepted_since_start < self.cfg.max_gated_in_a_row {
+                // The restart did not cure it: the measurements are noisy.
+                pending.commit(vb);
+            }
+            pending.alpha += 1.0;
+            pending.beta += 0.5 * excess;
+        }
+        if self.state.gated_in_a_row > self.cfg.max_gated_in_a_row {
+            self.restarts += 1;
+            for (p, vb) in self.state.pending.iter_mut().zip(&mut self.state.vb) {
+                // Failed twice in a row: not the track's fault.
+                if p.before_restart {
+                    p.commit(vb);
+                }
+                p.before_restart = true;
+            }
+            let (lat, lon, cov_en) = at;
+            self.start(lat, lon, cov_en);
+            return Outcome::Restarted;
+        }
+        Outcome::Gated
     }
 
     /// A source's nominal noise changes from a stand-in to its own claim
