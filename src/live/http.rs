@@ -2,8 +2,8 @@
 //! files embedded, see [`super::map_assets`]), its data under `/data/`
 //! (readsb's `aircraft.json` and `receiver.json`, fuse1090's
 //! `receivers.json` and the map's `map.json`, see [`super::web`]) and
-//! `/metrics`; `[service]
-//! metrics_listen` serves `/metrics` alone. Both over hyper, by the same code.
+//! `/metrics`; `[service] metrics_listen` serves `/metrics` alone. Both
+//! over hyper, by the same code.
 //!
 //! Bounded, because anyone who reaches the port can open connections: at
 //! most `max_connections` at once (more are closed at accept and counted),
