@@ -172,6 +172,7 @@
     layers.conflicts.clearLayers();
     if (!doc) return;
     const zoomedIn = map.getZoom() >= ELLIPSE_ZOOM;
+    let ellipses = 0;
     for (const ac of doc.aircraft) {
       if (!hasPos(ac)) continue;
       if (zoomedIn) {
@@ -179,6 +180,7 @@
         if (pts) {
           L.polygon(pts, { color: COLOURS[source(ac)], weight: 1, fillOpacity: 0.12, interactive: false, renderer: canvas })
             .addTo(layers.ellipses);
+          ellipses += 1;
         }
       }
       // A conflict pair is joined once, from the lower address.
@@ -190,6 +192,8 @@
         }
       }
     }
+    // Drawn on a canvas, where no element shows them: counted for checks.
+    document.body.dataset.ellipses = ellipses;
   }
 
   function drawReceivers() {

@@ -10,6 +10,8 @@
 // - the receivers drawn are those of receivers.json;
 // - clicking an aircraft selects it: its details and its table row;
 // - clicking a column sorts the table by it;
+// - zoomed in, every aircraft with a covariance has its 95% ellipse (the
+//   page counts what it drew on its canvas), zoomed out none;
 // - alerts are drawn: the demo has none, so the page is then served the
 //   same document with one aircraft made ADS-B suspect and two put in
 //   conflict (through the browser's request routing), and must ring the one
@@ -106,6 +108,40 @@ try {
   const down = await page.$$eval('#table tbody tr', (rows) => rows.map((r) => r.dataset.hex));
   check(up.length > 1 && sameSet(up, up.slice().sort()), `not sorted up by hex: ${up}`);
   check(sameSet(down, down.slice().sort().reverse()), `not sorted down by hex: ${down}`);
+  // Zoomed in, every aircraft with a position and a covariance gets its
+  // 95% ellipse; zoomed out, none.
+  // The count and the document it was drawn from, on the same refresh.
+  const ellipses = async () => {
+    for (let i = 0; i < 40; i++) {
+      const e = await page.evaluate(async () => {
+        const now = document.body.dataset.now;
+        const drawn = Number(document.body.dataset.ellipses);
+        const doc = await (await fetch('data/aircraft.json', { cache: 'no-store' })).json();
+        const wanted = doc.aircraft.filter((a) => typeof a.lat === 'number' && a.fuse1090 && a.fuse1090.cov_en).length;
+        return { same: String(doc.now) === now, drawn, wanted };
+      });
+      if (e.same) return e;
+      await page.waitForTimeout(100);
+    }
+    return { same: false, drawn: -1, wanted: -1 };
+  };
+  const zoom = async (button, times) => {
+    for (let i = 0; i < times; i++) {
+      await page.click(`.leaflet-control-zoom-${button}`);
+      await page.waitForTimeout(350);
+    }
+    await page.waitForTimeout(1200);
+  };
+  // From the fitted view (about zoom 12 on the demo) out by three, then in
+  // by six, then back.
+  await zoom('out', 3);
+  const out = await ellipses();
+  await zoom('in', 6);
+  const inside = await ellipses();
+  await zoom('out', 3);
+  check(out.same && out.drawn === 0, `zoomed out: ${JSON.stringify(out)}`);
+  check(inside.same && inside.drawn === inside.wanted && inside.wanted > 0, `zoomed in: ${JSON.stringify(inside)}`);
+
   // The screenshot: the demo as it is (before the alerts are made up
   // below), the table sorted by altitude as it opens.
   await page.click('#table th[data-key="alt"]');
