@@ -59,19 +59,21 @@ pub fn id13(squawk: u16) -> u16 {
 
 /// A DF17 frame from its address and ME field.
 pub fn df17(ca: u8, addr: u32, me: u64) -> [u8; 14] {
-    let mut f = [0u8; 14];
-    f[0] = (17 << 3) | (ca & 7);
-    f[1..4].copy_from_slice(&addr.to_be_bytes()[1..]);
-    f[4..11].copy_from_slice(&me.to_be_bytes()[1..]);
-    set_parity(&mut f, 0);
-    f
+    extended_squitter(17, ca, addr, me)
 }
 
 /// A DF18 frame (extended squitter from a non-transponder device: `cf` 2 is
 /// fine TIS-B with an ICAO address, what multilateration results are sent as).
 pub fn df18(cf: u8, addr: u32, me: u64) -> [u8; 14] {
-    let mut f = df17(0, addr, me);
-    f[0] = (18 << 3) | (cf & 7);
+    extended_squitter(18, cf, addr, me)
+}
+
+/// DF17 or DF18: the format, its 3-bit CA or CF, the address, ME, parity.
+fn extended_squitter(df: u8, low3: u8, addr: u32, me: u64) -> [u8; 14] {
+    let mut f = [0u8; 14];
+    f[0] = (df << 3) | (low3 & 7);
+    f[1..4].copy_from_slice(&addr.to_be_bytes()[1..]);
+    f[4..11].copy_from_slice(&me.to_be_bytes()[1..]);
     set_parity(&mut f, 0);
     f
 }

@@ -214,7 +214,7 @@ fn aircraft(e: &Entry, now: f64) -> Aircraft<'_> {
             r.alt_baro_ft.map(serde_json::Value::from)
         },
         alt_geom: ro.alt_geom_ft,
-        gs: ro.gs_kt.map(|v| round(v, 10.0)),
+        gs: ro.gs_kt().map(|v| round(v, 10.0)),
         track: ro.track_deg.map(|v| round(v, 100.0)),
         geom_rate: ro.geom_rate_fpm,
         squawk: r.squawk.map(|s| format!("{s:04x}")),

@@ -22,9 +22,7 @@ const TRACK_MIN_SIGMAS: f64 = 3.0;
 pub struct Readout {
     /// Height above the WGS-84 ellipsoid (ft).
     pub alt_geom_ft: Option<i64>,
-    /// Ground speed (kt), once known.
-    pub gs_kt: Option<f64>,
-    /// East and north velocity (kt), when the ground speed is known.
+    /// East and north velocity (kt), once known (see [`Readout::gs_kt`]).
     pub vel_en_kt: Option<[f64; 2]>,
     /// True track over ground (degrees), once the speed is well above its error.
     pub track_deg: Option<f64>,
@@ -36,6 +34,13 @@ pub struct Readout {
     pub adsb: bool,
 }
 
+impl Readout {
+    /// Ground speed (kt), once known.
+    pub fn gs_kt(&self) -> Option<f64> {
+        self.vel_en_kt.map(|[e, n]| e.hypot(n))
+    }
+}
+
 pub fn readout(r: &TrackReport) -> Readout {
     let est = &r.est;
     let [ve, vn, vu] = est.vel_enu;
@@ -45,7 +50,6 @@ pub fn readout(r: &TrackReport) -> Readout {
     let known = vel_sigma <= MAX_VEL_SIGMA_MS;
     Readout {
         alt_geom_ft: est.alt_m.map(|a| (a * M_TO_FT).round() as i64),
-        gs_kt: known.then_some(speed * MS_TO_KT),
         vel_en_kt: known.then_some([ve * MS_TO_KT, vn * MS_TO_KT]),
         track_deg: (known && speed > TRACK_MIN_SIGMAS * vel_sigma)
             .then(|| ve.atan2(vn).to_degrees().rem_euclid(360.0)),

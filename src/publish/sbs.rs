@@ -98,14 +98,14 @@ impl SbsWriter {
         let head = Head { addr: r.addr, t: est.t, now };
         let alt = r.alt_baro_ft.map(|a| a.to_string()).unwrap_or_default();
         let (lat, lon) = (format!("{:.5}", est.lat), format!("{:.5}", est.lon));
-        let gs = ro.gs_kt.map(|v| format!("{v:.0}")).unwrap_or_default();
+        let gs = ro.gs_kt().map(|v| format!("{v:.0}")).unwrap_or_default();
         let track = ro.track_deg.map(|v| format!("{:.0}", v.round() % 360.0)).unwrap_or_default();
         let rate = ro.geom_rate_fpm.map(|v| v.to_string()).unwrap_or_default();
         if seen.surface == Some(true) {
             head.line(out, 2, ["", "", &gs, &track, &lat, &lon, "", "", "", "", "", ground]);
         } else {
             head.line(out, 3, ["", &alt, "", "", &lat, &lon, "", "", "", "", "", ground]);
-            if ro.gs_kt.is_some() {
+            if ro.gs_kt().is_some() {
                 head.line(out, 4, ["", "", &gs, &track, "", "", &rate, "", "", "", "", ground]);
             }
         }
