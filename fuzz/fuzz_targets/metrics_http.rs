@@ -1,7 +1,8 @@
 //! Fuzz target: arbitrary bytes as what a client sends to the HTTP server
-//! (`/metrics` and the `/data/` documents), served over an in-memory stream by the same connection code as
-//! a socket; whatever comes back is read to the end. It must never panic
-//! or hang (the client's side is closed after the bytes).
+//! (`/metrics`, the `/data/` documents and the map's files), served over an
+//! in-memory stream by the same connection code as a socket; whatever comes
+//! back is read to the end. It must never panic or hang (the client's side
+//! is closed after the bytes).
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
