@@ -127,17 +127,7 @@ fn config(w: &World, ports: &[u16], outputs: &[(u16, &str)]) -> String {
 
 /// The Python with `asterix_decoder`, or `None` (with a message).
 fn python() -> Option<PathBuf> {
-    let candidates =
-        [std::env::var("FUSE1090_PYTHON").ok().map(PathBuf::from), Some(root().join(".venv/bin/python"))];
-    for p in candidates.into_iter().flatten() {
-        if Command::new(&p).args(["-c", "import asterix"]).output().is_ok_and(|o| o.status.success()) {
-            return Some(p);
-        }
-    }
-    common::skipped(
-        "no Python with asterix_decoder (.ci/run installs it in .venv); ASTERIX not cross-checked",
-    );
-    None
+    common::python_with("asterix", "ASTERIX not cross-checked")
 }
 
 /// Decodes data blocks with asterix_decoder: (track number, address, lat, lon, time of day).

@@ -99,7 +99,8 @@ pub fn run(args: DecodeArgs) -> Result<()> {
     eprintln!(
         "decode: {} frames ({} Mode S, {} Mode A/C), {} parity ok, {} corrected, {} parity bad, \
          {} address/parity from unknown addresses, {} garbage bytes, {} broken frames, \
-         {} positions ({} unconfirmed), {} aircraft",
+         {} positions ({} unconfirmed), {} aircraft; Comm-B: {} identified, {} ambiguous, \
+         {} contradicting the aircraft, {} fitting no register",
         fs.frames(),
         ds.mode_s,
         ds.mode_ac,
@@ -111,7 +112,11 @@ pub fn run(args: DecodeArgs) -> Result<()> {
         fs.broken_frames,
         ds.positions_reliable,
         ds.positions_unconfirmed,
-        decoder.aircraft_count()
+        decoder.aircraft_count(),
+        ds.commb.identified,
+        ds.commb.ambiguous,
+        ds.commb.contradicted,
+        ds.commb.no_register,
     );
     if ds.mode_s == 0 {
         bail!("{name}: no Mode S frames found ({} bytes of {format:?} input)", fs.bytes);

@@ -13,6 +13,7 @@
 
 use crate::FastMap;
 
+use super::commb::{self, CommbStats, Inference};
 use super::cpr::{self, CprFields};
 use super::crc::SingleBitTable;
 use super::message::{self, extended_body, Body, Es, FrameError, Message, Parity};
@@ -77,6 +78,8 @@ pub struct Decoded {
     pub nac_p: Option<u8>,
     /// The aircraft's latest GNSS-minus-baro altitude difference (ft).
     pub gnss_baro_diff_ft: Option<i32>,
+    /// A DF20/21 reply's Comm-B register, inferred with what is known of the aircraft.
+    pub commb: Option<Inference>,
 }
 
 impl Decoded {
@@ -116,6 +119,7 @@ pub struct DecodeStats {
     pub cpr_speed_reject: u64,
     pub positions_reliable: u64,
     pub positions_unconfirmed: u64,
+    pub commb: CommbStats,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -147,6 +151,7 @@ struct Aircraft {
     odd: Option<CprRecord>,
     pos: Option<PosRecord>,
     reliable: u8,
+    commb: commb::Memory,
 }
 
 const MAX_RELIABLE: u8 = 4;
@@ -267,14 +272,36 @@ impl Decoder {
             heading_true: false,
             nac_p: None,
             gnss_baro_diff_ft: None,
+            commb: None,
+        };
+        let (own_alt_ft, mb) = match msg.body {
+            Body::Altitude { alt_ft, mb, .. } => (alt_ft, mb),
+            Body::Identity { mb, .. } => (None, mb),
+            _ => (None, None),
         };
         if !known {
+            if let Some(mb) = mb {
+                // Of an aircraft not known, only the reply's own altitude is.
+                let inference = commb::infer(mb, &commb::Memory::default().known(t, own_alt_ft));
+                self.stats.commb.count(&inference);
+                out.commb = Some(inference);
+            }
             return Ok(out);
         }
         let min_reliable = self.cfg.min_reliable;
         let max_range = self.cfg.max_range_m;
         let ac = self.aircraft.get_mut(&k).expect("known aircraft");
         ac.last_seen = t;
+        if let Body::AirAir { alt_ft: Some(alt), .. } | Body::Altitude { alt_ft: Some(alt), .. } = msg.body {
+            ac.commb.note_altitude(alt, t);
+        }
+        if let Some(mb) = mb {
+            let inference = commb::infer(mb, &ac.commb.known(t, own_alt_ft));
+            ac.commb.note(&inference, t);
+            self.stats.commb.count(&inference);
+            out.commb = Some(inference);
+            return Ok(out);
+        }
         if let Body::Extended(es) = msg.body {
             match es.kind {
                 Es::OperationalStatus(os) => {
@@ -293,11 +320,17 @@ impl Decoder {
                     if let Some(gs) = v.gs_kt() {
                         ac.gs_kt = Some(gs);
                     }
+                    if let (Some(gs), Some(track)) = (v.gs_kt(), v.track_deg()) {
+                        ac.commb.note_velocity(track, gs, t);
+                    }
                     if v.gnss_baro_diff_ft.is_some() {
                         ac.gnss_baro_diff_ft = v.gnss_baro_diff_ft;
                     }
                 }
-                Es::AirbornePosition { cpr, nic_b, .. } => {
+                Es::AirbornePosition { cpr, nic_b, alt_ft, gnss, .. } => {
+                    if let (Some(alt), false) = (alt_ft, gnss) {
+                        ac.commb.note_altitude(alt, t);
+                    }
                     out.position =
                         resolve(ac, &mut self.stats, cpr, false, t, reference, max_range, min_reliable);
                     out.nic = nic::nic(es.tc, ac.version.unwrap_or(0), ac.nic_a, nic_b, 0);
@@ -485,8 +518,11 @@ fn resolve(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::modes::commb::Register;
     use crate::modes::cpr::encode as cpr_encode;
-    use crate::modes::encode::{df11, df17, me_airborne_position, me_surface_position, surveillance_reply};
+    use crate::modes::encode::{
+        ac13_q, df11, df17, me_airborne_position, me_surface_position, surveillance_reply,
+    };
 
     const ADDR: u32 = 0x3C6DD4;
 
@@ -615,5 +651,34 @@ mod tests {
         d.decode(&position(50.0, 8.0, false), 0.0).unwrap();
         assert!(d.decode(&position(50.0005, 8.0, true), 0.5).unwrap().position.is_none());
         assert!(d.stats().cpr_range_reject >= 1);
+    }
+
+    #[test]
+    fn comm_b_inference_uses_what_is_known_of_the_aircraft() {
+        // A real DF21 reply (pyModeS's sample): 6,0 with IAS 279 kt and Mach
+        // 0.688 (26,400 ft in ISA), or 5,0 with roll 22.5 deg and 344 kt.
+        let (addr, mb) = (0x4CA6E3, 0x901A2F2B21B000);
+        let df21 = frame(&surveillance_reply(21, 0, 0, addr, Some(mb)));
+        let altitude = |ft| frame(&surveillance_reply(4, 0, ac13_q(ft).unwrap(), addr, None));
+        let mut d = Decoder::new(DecoderConfig::default());
+        // Of an unknown address nothing is remembered, whatever it sent.
+        d.decode(&altitude(26_400), 0.0).unwrap();
+        assert!(matches!(d.decode(&df21, 0.5).unwrap().commb, Some(Inference::Ambiguous(_))));
+        d.decode(&frame(&df11(5, addr, 0)), 1.0).unwrap();
+        d.decode(&altitude(26_400), 2.0).unwrap();
+        match d.decode(&df21, 3.0).unwrap().commb {
+            Some(Inference::Identified(Register::HeadingSpeed(r))) => assert_eq!(r.ias_kt, Some(279)),
+            other => panic!("{other:?}"),
+        }
+        // At 10,000 ft that IAS is not that Mach: not 6,0, and 5,0 has nothing for it.
+        d.decode(&altitude(10_000), 4.0).unwrap();
+        assert!(matches!(
+            d.decode(&df21, 5.0).unwrap().commb,
+            Some(Inference::Identified(Register::TrackTurn(_)))
+        ));
+        // An altitude a minute old is not used.
+        assert!(matches!(d.decode(&df21, 70.0).unwrap().commb, Some(Inference::Ambiguous(_))));
+        let c = d.stats().commb;
+        assert_eq!((c.identified, c.ambiguous), (2, 2));
     }
 }

@@ -3,7 +3,8 @@
 
 use serde::Serialize;
 
-use super::commb::bds20_callsign;
+pub use super::commb::CommbFields;
+use super::commb::{Inference, Register};
 use super::fields::{callsign_str, squawk_string};
 use super::{Body, Decoded, Es, Parity};
 use crate::feed::RawFrame;
@@ -55,6 +56,13 @@ pub struct DecodeRecord {
     pub cpr: Option<&'static str>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub surface: Option<bool>,
+    /// Comm-B: the register, or "ambiguous" with the candidates.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bds: Option<&'static str>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bds_candidates: Option<Vec<&'static str>>,
+    #[serde(flatten)]
+    pub commb: CommbFields,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub lat: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -64,7 +72,7 @@ pub struct DecodeRecord {
     pub signal: u8,
 }
 
-fn round(v: f64, decimals: i32) -> f64 {
+pub(crate) fn round(v: f64, decimals: i32) -> f64 {
     let k = 10f64.powi(decimals);
     (v * k).round() / k
 }
@@ -86,14 +94,8 @@ impl DecodeRecord {
         }
         match m.body {
             Body::AirAir { alt_ft, .. } => r.alt_baro = alt_ft,
-            Body::Altitude { alt_ft, mb, .. } => {
-                r.alt_baro = alt_ft;
-                r.flight = mb.and_then(bds20_callsign).map(|cs| callsign_str(&cs).to_string());
-            }
-            Body::Identity { squawk, mb, .. } => {
-                r.squawk = Some(squawk_string(squawk));
-                r.flight = mb.and_then(bds20_callsign).map(|cs| callsign_str(&cs).to_string());
-            }
+            Body::Altitude { alt_ft, .. } => r.alt_baro = alt_ft,
+            Body::Identity { squawk, .. } => r.squawk = Some(squawk_string(squawk)),
             Body::Extended(es) => {
                 r.tc = Some(es.tc);
                 match es.kind {
@@ -159,6 +161,32 @@ impl DecodeRecord {
                 }
             }
             Body::AllCall { .. } | Body::Undecoded => {}
+        }
+        match d.commb {
+            Some(Inference::Identified(reg)) => {
+                r.bds = Some(reg.bds().as_str());
+                match reg {
+                    Register::Identification(cs) => r.flight = Some(callsign_str(&cs).to_string()),
+                    Register::TrackTurn(t) => {
+                        r.track = t.track_deg.map(|v| round(v, 2));
+                        r.gs = t.gs_kt.map(f64::from);
+                        r.tas = t.tas_kt.map(|v| v as u16);
+                    }
+                    Register::HeadingSpeed(h) => {
+                        r.mag_heading = h.mag_heading_deg.map(|v| round(v, 2));
+                        r.ias = h.ias_kt.map(|v| v as u16);
+                        r.baro_rate = h.baro_rate_fpm;
+                        r.geom_rate = h.inertial_rate_fpm;
+                    }
+                    _ => {}
+                }
+                r.commb = CommbFields::new(&reg);
+            }
+            Some(Inference::Ambiguous(c)) => {
+                r.bds = Some("ambiguous");
+                r.bds_candidates = Some(c.iter().map(|b| b.as_str()).collect());
+            }
+            Some(Inference::Contradicted(_) | Inference::NoRegister) | None => {}
         }
         r
     }

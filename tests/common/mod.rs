@@ -38,6 +38,22 @@ pub fn shared_data(rel: &str) -> Option<PathBuf> {
     }
 }
 
+/// A Python that imports `module` (`FUSE1090_PYTHON`, else the `.venv` that
+/// `.ci/run` fills), or `None`, saying so through [`skipped`] with `unchecked`.
+pub fn python_with(module: &str, unchecked: &str) -> Option<PathBuf> {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let candidates =
+        [std::env::var("FUSE1090_PYTHON").ok().map(PathBuf::from), Some(root.join(".venv/bin/python"))];
+    for p in candidates.into_iter().flatten() {
+        let ok = std::process::Command::new(&p).args(["-c", &format!("import {module}")]).output();
+        if ok.is_ok_and(|o| o.status.success()) {
+            return Some(p);
+        }
+    }
+    skipped(&format!("no Python with {module} (.ci/run installs it in .venv); {unchecked}"));
+    None
+}
+
 /// A scratch directory for one test, removed when the returned guard drops
 /// (also when the test panics), so that repeated runs do not fill the disk.
 pub fn scratch(name: &str) -> tempfile::TempDir {
