@@ -4,16 +4,18 @@
 //! The mix is the real beastblackbox capture's Mode S frames when ../shared is
 //! present (DF17 of every type code, DF11, DF0/4/5/16/20/21 in their recorded
 //! proportions), else a synthetic mix built with our encoders in the same
-//! proportions. Run: `cargo bench --bench decode`.
+//! proportions; and Comm-B register inference per reply on real replies. Run:
+//! `cargo bench --bench decode`.
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
 use fuse1090::feed::beast::encode as beast_encode;
 use fuse1090::feed::{BeastParser, FeedEvent, RawFrame};
+use fuse1090::modes::commb::{infer, Inference, Known};
 use fuse1090::modes::cpr::encode as cpr_encode;
 use fuse1090::modes::encode::{
     ac13_q, df11, df17, me_airborne_position, me_identification, me_velocity, surveillance_reply,
 };
-use fuse1090::modes::{decode, Decoder, DecoderConfig};
+use fuse1090::modes::{decode, Body, Decoder, DecoderConfig};
 
 const CAPTURE: &str = "../shared/data/real/beastblackbox/ulss7-beast-bin-utc--1522782148.136310917--.log";
 
@@ -84,6 +86,7 @@ fn bench(c: &mut Criterion) {
         )
     });
     g.finish();
+    bench_commb(c);
 
     let mut wire = Vec::new();
     while wire.len() < 4 << 20 {
@@ -108,6 +111,49 @@ fn bench(c: &mut Criterion) {
         })
     });
     g.finish();
+}
+
+const COMMB: [&str; 2] = [
+    "../shared/data/real/pymodes/sample_data_commb_df20.csv",
+    "../shared/data/real/pymodes/sample_data_commb_df21.csv",
+];
+
+/// Comm-B inference alone, per reply, on pyModeS's 10,000 real DF20/21
+/// replies (4,0, 5,0 and 6,0 mostly: the full inference, not the 2,0 fast
+/// path), each with its own altitude where it carries one.
+fn bench_commb(c: &mut Criterion) {
+    let text: String = COMMB.iter().filter_map(|p| std::fs::read_to_string(p).ok()).collect();
+    let replies: Vec<(u64, Known)> = text
+        .lines()
+        .filter_map(|l| decode(&unhex(l.rsplit(',').next()?)?).ok())
+        .filter_map(|m| match m.body {
+            Body::Altitude { alt_ft, mb: Some(mb), .. } => {
+                Some((mb, Known { alt_ft: alt_ft.map(|a| (a, 0.0)), velocity: None }))
+            }
+            Body::Identity { mb: Some(mb), .. } => Some((mb, Known::default())),
+            _ => None,
+        })
+        .collect();
+    if replies.is_empty() {
+        eprintln!("commb_infer: ../shared/data/real/pymodes absent, not measured");
+        return;
+    }
+    let mut g = c.benchmark_group("decode");
+    g.throughput(Throughput::Elements(replies.len() as u64));
+    g.bench_function("commb_infer", |b| {
+        b.iter(|| {
+            replies
+                .iter()
+                .filter(|(mb, k)| matches!(infer(black_box(*mb), k), Inference::Identified(_)))
+                .count()
+        })
+    });
+    g.finish();
+}
+
+fn unhex(s: &str) -> Option<Vec<u8>> {
+    let s = s.trim();
+    (0..s.len()).step_by(2).map(|i| u8::from_str_radix(s.get(i..i + 2)?, 16).ok()).collect()
 }
 
 criterion_group!(benches, bench);
