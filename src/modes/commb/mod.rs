@@ -207,11 +207,6 @@ pub fn infer(mb: u64, known: &Known) -> Inference {
     )
 }
 
-/// The callsign of a BDS 2,0 reply, if `mb` is one.
-pub fn bds20_callsign(mb: u64) -> Option<[u8; 8]> {
-    registers::bds20(mb)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -221,9 +216,9 @@ mod tests {
     fn identification_register() {
         // DF20 from the beastblackbox capture; pyModeS reads AAR542.
         let mb = u64::from_str_radix("200414B5D32820", 16).unwrap();
-        assert_eq!(callsign_str(&bds20_callsign(mb).unwrap()), "AAR542");
-        assert_eq!(bds20_callsign(u64::from_str_radix("10000000000000", 16).unwrap()), None);
-        assert_eq!(bds20_callsign(0x20 << 48), None);
+        assert_eq!(callsign_str(&registers::bds20(mb).unwrap()), "AAR542");
+        assert_eq!(registers::bds20(u64::from_str_radix("10000000000000", 16).unwrap()), None);
+        assert_eq!(registers::bds20(0x20 << 48), None);
     }
 
     #[test]
