@@ -405,15 +405,21 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
         let span = truth.span(&hex).unwrap_or((0.0, 0.0));
         let (cont, breaks) = coverage(&mut acc.times, span);
         aircraft_rows.push(make_row(&source, &hex, 1, &acc, cont, breaks, false_tracks));
-        let o = overall.entry(source).or_default();
-        o.0.h_err.extend(&acc.h_err);
-        o.0.v_err.extend(&acc.v_err);
-        o.0.nees.extend(&acc.nees);
-        o.0.crb.extend(&acc.crb);
-        o.1 += 1;
-        o.2 += cont;
-        o.3 += breaks;
-        o.4 += false_tracks;
+        // The tracks of aircraft without ADS-B also in a row of their own:
+        // what multilateration and Mode S alone give.
+        let mode_s_only = matches!(source.as_str(), "fused" | "mlat") && truth.adsb.get(&hex) == Some(&false);
+        let rows = [Some(source.clone()), mode_s_only.then(|| format!("{source}:mode-s-only"))];
+        for key in rows.into_iter().flatten() {
+            let o = overall.entry(key).or_default();
+            o.0.h_err.extend(&acc.h_err);
+            o.0.v_err.extend(&acc.v_err);
+            o.0.nees.extend(&acc.nees);
+            o.0.crb.extend(&acc.crb);
+            o.1 += 1;
+            o.2 += cont;
+            o.3 += breaks;
+            o.4 += false_tracks;
+        }
     }
     let overall = overall
         .into_iter()

@@ -9,6 +9,7 @@
 //! on the scenario.
 
 pub mod clock;
+pub mod commb;
 pub mod scenario;
 pub mod trajectory;
 pub mod transmit;
@@ -275,7 +276,7 @@ pub fn simulate(s: &Scenario, capture: impl Write, mut truth: impl Write) -> Res
         .iter()
         .enumerate()
         .map(|(i, a)| {
-            Transmitter::new(a, s.interrogation_hz, s.baro_offset_m, rng(s.seed, 20_000 + i as u64))
+            Transmitter::new(a, s.interrogation_hz, &s.commb, s.baro_offset_m, rng(s.seed, 20_000 + i as u64))
         })
         .collect();
 

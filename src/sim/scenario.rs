@@ -11,6 +11,7 @@ use anyhow::{bail, Result};
 use serde::{Deserialize, Deserializer};
 
 use crate::feed::capture::ClockKind;
+use crate::modes::commb::Bds;
 
 fn checked<'de, D: Deserializer<'de>>(d: D, ok: impl Fn(f64) -> bool, what: &str) -> Result<f64, D::Error> {
     let v = f64::deserialize(d)?;
@@ -75,6 +76,10 @@ pub struct Scenario {
     /// Default Mode S reply rate (DF4/5/20/21) per aircraft (Hz).
     #[serde(default = "default_interrogation_hz", deserialize_with = "non_negative")]
     pub interrogation_hz: f64,
+    /// The Comm-B registers DF20/21 replies carry, one at random each
+    /// ("2,0", "4,0", "5,0", "6,0"): what the interrogators ask for.
+    #[serde(default = "default_commb", deserialize_with = "commb_registers")]
+    pub commb: Vec<Bds>,
     #[serde(default)]
     pub receiver: Vec<Receiver>,
     #[serde(default)]
@@ -83,6 +88,28 @@ pub struct Scenario {
     pub aircraft: Vec<Aircraft>,
     #[serde(default)]
     pub traffic: Vec<Traffic>,
+}
+
+fn default_commb() -> Vec<Bds> {
+    vec![Bds::B20]
+}
+
+/// The registers the simulator can fill from an aircraft's state.
+fn commb_registers<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<Bds>, D::Error> {
+    let names = Vec::<String>::deserialize(d)?;
+    let regs = names
+        .iter()
+        .map(|n| n.parse::<Bds>())
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(serde::de::Error::custom)?;
+    match regs.iter().find(|b| !matches!(b, Bds::B20 | Bds::B40 | Bds::B50 | Bds::B60)) {
+        Some(b) => Err(serde::de::Error::custom(format!(
+            "the simulator writes 2,0, 4,0, 5,0 and 6,0, not {}",
+            b.as_str()
+        ))),
+        None if regs.is_empty() => Err(serde::de::Error::custom("no Comm-B register")),
+        None => Ok(regs),
+    }
 }
 
 fn default_interrogation_hz() -> f64 {

@@ -13,6 +13,7 @@ use rand_distr::StandardNormal;
 use super::scenario::Aircraft;
 use super::trajectory::{Sample, Trajectory};
 use crate::geo::{displace, FT_TO_M};
+use crate::modes::commb::Bds;
 use crate::modes::cpr::encode as cpr_encode;
 use crate::modes::encode::{
     ac13_q, df11, df17, id13, me_airborne_position, me_identification, me_operational_status,
@@ -55,6 +56,8 @@ pub struct Transmitter {
     schedules: Vec<Schedule>,
     next_odd: bool,
     reply_cycle: u8,
+    /// The Comm-B registers DF20/21 replies carry, one at random each.
+    commb: Vec<Bds>,
     /// GNSS error state (east, north, up; m) and when it was last advanced.
     gnss: [f64; 3],
     gnss_t: f64,
@@ -77,6 +80,7 @@ impl Transmitter {
     pub fn new(
         spec: &Aircraft,
         default_interrogation_hz: f64,
+        commb: &[Bds],
         baro_offset_m: f64,
         mut rng: ChaCha8Rng,
     ) -> Self {
@@ -113,6 +117,7 @@ impl Transmitter {
             schedules,
             next_odd: rng.gen(),
             reply_cycle: 0,
+            commb: commb.to_vec(),
             gnss,
             gnss_t: spec.start_s,
             sigma_m,
@@ -197,17 +202,36 @@ impl Transmitter {
                 let fs = if self.spec.on_ground { 1 } else { 0 };
                 let alt = ac13_q(baro_ft).unwrap_or(0);
                 let squawk = u16::from_str_radix(&self.spec.squawk, 16).unwrap_or(0x1000);
-                let mb = (0x20u64 << 48) | (me_identification(0xA0, &self.spec.callsign) & 0xFFFF_FFFF_FFFF);
                 match self.reply_cycle {
                     0 => surveillance_reply(4, fs, alt, addr, None),
                     1 => surveillance_reply(5, fs, id13(squawk), addr, None),
-                    2 => surveillance_reply(20, fs, alt, addr, Some(mb)),
-                    _ => surveillance_reply(21, fs, id13(squawk), addr, Some(mb)),
+                    2 => surveillance_reply(20, fs, alt, addr, Some(self.commb_register(traj, t))),
+                    _ => surveillance_reply(21, fs, id13(squawk), addr, Some(self.commb_register(traj, t))),
                 }
             }
         };
         let mut bytes = [0u8; 14];
         bytes[..frame.len()].copy_from_slice(&frame);
         Some(Transmission { t, bytes, len: frame.len(), true_pos: s })
+    }
+
+    /// The MB of the next DF20/21 reply: one of the registers, filled
+    /// from the aircraft's state (see [`super::commb`]).
+    fn commb_register(&mut self, traj: &Trajectory, t: f64) -> u64 {
+        // Which register an interrogator asks for does not depend on whether
+        // it asked for the altitude (DF20) or the identity (DF21) with it.
+        let bds = match self.commb.len() {
+            1 => self.commb[0],
+            n => self.commb[self.rng.gen_range(0..n)],
+        };
+        if bds == Bds::B20 {
+            return (0x20u64 << 48) | (me_identification(0xA0, &self.spec.callsign) & 0xFFFF_FFFF_FFFF);
+        }
+        // A transponder answers from its register, which the avionics refresh
+        // every 1.3 s at the most (ICAO Doc 9871): the values are up to that old.
+        let lag_s = self.rng.gen_range(0.0..super::commb::REFRESH_S);
+        let filled = super::commb::register(bds, traj, t - lag_s, self.baro_offset_m);
+        // Just after the aircraft appeared, its state now.
+        filled.or_else(|| super::commb::register(bds, traj, t, self.baro_offset_m)).unwrap_or(0)
     }
 }

@@ -55,6 +55,17 @@ pub fn mach_of_cas(cas_kt: f64, alt_ft: f64) -> f64 {
     (5.0 * ((ratio + 1.0).powf(2.0 / 7.0) - 1.0)).sqrt()
 }
 
+/// Speed of sound (m/s) in the ISA atmosphere at a pressure altitude (ft).
+pub fn speed_of_sound_ms(alt_ft: f64) -> f64 {
+    A0_MS * ((isa_temperature_c(alt_ft) + 273.15) / T0_K).sqrt()
+}
+
+/// The calibrated airspeed (kt) of a Mach number at a pressure altitude (subsonic).
+pub fn cas_of_mach(mach: f64, alt_ft: f64) -> f64 {
+    let qc = pressure_pa(alt_ft) * ((1.0 + 0.2 * mach * mach).powf(3.5) - 1.0);
+    A0_MS * (5.0 * ((qc / P0_PA + 1.0).powf(2.0 / 7.0) - 1.0)).sqrt() / KT
+}
+
 /// The pressure altitude (ft) at which a calibrated airspeed is this Mach
 /// number; `None` for a Mach of zero.
 pub fn altitude_of_cas_mach(cas_kt: f64, mach: f64) -> Option<f64> {
@@ -81,5 +92,8 @@ mod tests {
         assert!((mach_of_cas(280.0, 35_000.0) - 0.82).abs() < 0.01);
         let h = altitude_of_cas_mach(280.0, mach_of_cas(280.0, 35_000.0)).unwrap();
         assert!((h - 35_000.0).abs() < 1.0);
+        assert!((cas_of_mach(mach_of_cas(250.0, 12_000.0), 12_000.0) - 250.0).abs() < 1e-6);
+        // Mach 0.8 at FL350 (-54.3 deg C) is 461 kt true.
+        assert!((0.8 * speed_of_sound_ms(35_000.0) / KT - 461.0).abs() < 1.0);
     }
 }

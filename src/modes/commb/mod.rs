@@ -12,7 +12,8 @@
 //! clearly outweighs every other's; otherwise the reply is reported as
 //! ambiguous with its candidates, never guessed.
 
-mod air;
+pub mod air;
+pub mod encode;
 mod evidence;
 mod json;
 mod memory;
@@ -52,6 +53,16 @@ impl Bds {
             Bds::B50 => "5,0",
             Bds::B60 => "6,0",
         }
+    }
+}
+
+impl std::str::FromStr for Bds {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Candidates::ALL
+            .into_iter()
+            .find(|b| b.as_str() == s)
+            .ok_or_else(|| format!("{s:?} is not a Comm-B register"))
     }
 }
 

@@ -34,7 +34,7 @@ fn signed(sign: u32, magnitude: u32, width: u32) -> i32 {
     magnitude as i32 - if sign == 1 { 1 << width } else { 0 }
 }
 
-/// A signed angle (sign bit, then `width` bits of 180/2^(width-1) degrees)
+/// A signed angle (sign bit, then `width` bits of 180/2^width degrees)
 /// as degrees in [0, 360).
 #[inline]
 fn angle_deg(v: u32, width: u32) -> f64 {

@@ -1,0 +1,71 @@
+//! The Comm-B registers a simulated aircraft's DF20/21 replies carry, filled
+//! from its true state: 5,0 (track, ground speed, roll and track rate of a
+//! coordinated turn, true airspeed), 6,0 (heading, IAS and Mach, vertical
+//! rates) and 4,0 (the altitude it will hold in a minute as the selected
+//! altitude, standard altimeter setting). The simulated air is still and
+//! the magnetic variation zero, so heading is track and true airspeed is
+//! ground speed; values are the register's steps of the truth, no noise
+//! beyond that and the register's age (the caller's).
+
+use super::trajectory::{Sample, Trajectory};
+use crate::geo::FT_TO_M;
+use crate::modes::commb::registers::{Bds40, Bds50, Bds60};
+use crate::modes::commb::{air, encode, Bds};
+
+/// The longest a register's values may wait for their refresh (ICAO Doc 9871).
+pub const REFRESH_S: f64 = 1.3;
+
+const G: f64 = 9.80665;
+const MS_TO_KT: f64 = 3600.0 / 1852.0;
+
+fn track_deg(s: &Sample) -> f64 {
+    s.vel[0].atan2(s.vel[1]).to_degrees().rem_euclid(360.0)
+}
+
+/// The MB of register `bds` at scenario time `t`; `None` when the aircraft
+/// is not flying then (or the register is not one the simulator fills).
+pub fn register(bds: Bds, traj: &Trajectory, t: f64, baro_offset_m: f64) -> Option<u64> {
+    let s = traj.at(t)?;
+    let alt_ft = (s.alt_m - baro_offset_m) / FT_TO_M;
+    let gs_ms = s.vel[0].hypot(s.vel[1]);
+    let fpm = (s.vel[2] / FT_TO_M * 60.0).round() as i32;
+    Some(match bds {
+        Bds::B50 => {
+            // The turn rate over the second around t.
+            let (a, b) = (traj.at(t - 0.5).unwrap_or(s), traj.at(t + 0.5).unwrap_or(s));
+            let rate_dps = ((track_deg(&b) - track_deg(&a) + 540.0).rem_euclid(360.0) - 180.0)
+                * if gs_ms > 1.0 { 1.0 } else { 0.0 };
+            let roll_deg = (gs_ms * rate_dps.to_radians() / G).atan().to_degrees();
+            let kt = ((gs_ms * MS_TO_KT / 2.0).round() * 2.0) as u32;
+            encode::bds50(&Bds50 {
+                roll_deg: Some(roll_deg),
+                track_deg: Some(track_deg(&s)),
+                gs_kt: Some(kt),
+                track_rate_dps: Some(rate_dps),
+                tas_kt: Some(kt),
+            })
+        }
+        Bds::B60 => {
+            let mach = gs_ms / air::speed_of_sound_ms(alt_ft);
+            encode::bds60(&Bds60 {
+                mag_heading_deg: Some(track_deg(&s)),
+                ias_kt: Some(air::cas_of_mach(mach, alt_ft).round() as u32),
+                mach: Some(mach),
+                baro_rate_fpm: Some(fpm),
+                inertial_rate_fpm: Some(fpm),
+            })
+        }
+        Bds::B40 => {
+            let ahead = traj.at(t + 60.0).or_else(|| traj.at(traj.t_end())).unwrap_or(s);
+            let target_ft = ((ahead.alt_m - baro_offset_m) / FT_TO_M / 100.0).round() * 100.0;
+            encode::bds40(&Bds40 {
+                mcp_alt_ft: Some(target_ft.max(0.0) as u32),
+                fms_alt_ft: None,
+                baro_setting_hpa: Some(1013.2),
+                modes: None,
+                alt_source: None,
+            })
+        }
+        _ => return None,
+    })
+}
