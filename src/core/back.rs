@@ -40,6 +40,11 @@ pub enum Cmd {
         addr: u32,
         flight: String,
     },
+    /// The altitude selected on the autopilot (Comm-B 4,0), ft.
+    NavAltitude {
+        addr: u32,
+        alt_ft: u32,
+    },
     /// The conformance monitor's verdict on an aircraft's ADS-B changed.
     Suspect {
         addr: u32,
@@ -86,6 +91,7 @@ impl Back {
                 Cmd::AltBaro { addr, alt_ft } => self.fuser.set_alt_baro(addr, alt_ft),
                 Cmd::Squawk { addr, squawk } => self.fuser.set_squawk(addr, squawk),
                 Cmd::Flight { addr, flight } => self.fuser.set_flight(addr, flight),
+                Cmd::NavAltitude { addr, alt_ft } => self.fuser.set_nav_altitude(addr, alt_ft),
                 Cmd::Suspect { addr, t, suspect, offset_m, nis } => {
                     self.fuser.set_suspect(addr, t, suspect, offset_m, nis, o)
                 }

@@ -25,6 +25,7 @@ use crate::mlat::engine::{baro_height, GroupOutcome};
 use crate::mlat::group::{Added, Group, GroupInfo, Grouper};
 use crate::mlat::timing::KnownTiming;
 use crate::mlat::Mlat;
+use crate::modes::commb::{Inference, Register};
 use crate::modes::nic::{nacp_epu_m, nacv_bounds, nucp_hpl_m, R95_PER_SIGMA};
 use crate::modes::{Body, Decoder, DecoderConfig, Es};
 use crate::track::{Measurement, Observation, Source};
@@ -85,6 +86,8 @@ pub struct Front {
     /// Time-of-applicability sigma of ADS-B positions: GPS-timed, arrival-timed (s).
     time_sigma: (f64, f64),
     sync_inflation: f64,
+    /// Comm-B track and turn reports feed tracks without ADS-B velocity.
+    commb_velocity: bool,
     /// Receivers the configuration describes: what it says of them (its
     /// position and clock, and its timing when given) wins over their
     /// declaration in a capture.
@@ -123,6 +126,7 @@ impl Front {
             baro: RegionalBaro::default(),
             time_sigma: (cfg.track.adsb_time_sigma_gps_s, cfg.track.adsb_time_sigma_arrival_s),
             sync_inflation: cfg.track.mlat_sync_inflation,
+            commb_velocity: cfg.track.commb_velocity,
             known: Vec::new(),
         }
     }
@@ -488,6 +492,22 @@ impl Front {
                 out.push(Cmd::AltBaro { addr, alt_ft });
             }
             return;
+        }
+        match d.commb {
+            Some(Inference::Identified(Register::TrackTurn(r)))
+                if self.commb_velocity && !d.adsb_velocity_recent =>
+            {
+                if let Some(m) = super::commb::velocity(&r, arrival) {
+                    self.stats.commb_velocities += 1;
+                    out.push(Cmd::Measure { addr, nac_p: None, m, now: arrival });
+                }
+            }
+            Some(Inference::Identified(Register::SelectedVertical(r))) => {
+                if let Some(alt_ft) = r.mcp_alt_ft {
+                    out.push(Cmd::NavAltitude { addr, alt_ft });
+                }
+            }
+            _ => {}
         }
         let height_and_var = |alt_ft: i32| {
             let (h, sigma) = baro_height(alt_ft, correction, baro_sigma_m);

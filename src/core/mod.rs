@@ -17,6 +17,7 @@
 //! same output byte for byte.
 
 pub mod back;
+pub mod commb;
 pub mod delay;
 pub mod front;
 pub mod lateness;
@@ -161,6 +162,8 @@ pub struct CoreStats {
     pub conformance_checks: u64,
     /// ADS-B positions without a known accuracy (no NACp or NUCp): not tracked.
     pub untracked_positions: u64,
+    /// Comm-B track and turn reports given to tracks as velocities.
+    pub commb_velocities: u64,
 }
 
 /// Both stages on one thread: the front's commands applied as they come.

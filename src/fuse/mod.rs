@@ -87,6 +87,7 @@ struct Aircraft {
     alt_baro_ft: Option<i32>,
     flight: Option<Arc<str>>,
     squawk: Option<u16>,
+    nav_altitude_ft: Option<u32>,
     motion: MotionTest,
     motion_plane: Option<Plane>,
     motion_state: Motion,
@@ -167,6 +168,12 @@ impl Fuser {
     pub fn set_squawk(&mut self, addr: u32, squawk: u16) {
         if let Some(a) = self.aircraft.get_mut(&addr) {
             a.squawk = Some(squawk);
+        }
+    }
+
+    pub fn set_nav_altitude(&mut self, addr: u32, alt_ft: u32) {
+        if let Some(a) = self.aircraft.get_mut(&addr) {
+            a.nav_altitude_ft = Some(alt_ft);
         }
     }
 
@@ -256,6 +263,7 @@ impl Fuser {
                     alt_baro_ft: None,
                     flight: None,
                     squawk: None,
+                    nav_altitude_ft: None,
                     motion: self.motion.clone(),
                     motion_plane: None,
                     motion_state: Motion::Unknown,
@@ -713,6 +721,7 @@ impl Fuser {
             adsb_suspect: a.adsb_suspect,
             flight: a.flight.clone(),
             squawk: a.squawk,
+            nav_altitude_ft: a.nav_altitude_ft,
             ages_s: [Source::Adsb, Source::Mlat].map(|s| Some(age(s).max(0.0)).filter(|age| *age <= window)),
         };
         if let Some(est) = fused {

@@ -42,6 +42,8 @@ pub struct TrackReport {
     /// Shared with the aircraft: a copy per publication was an allocation.
     pub flight: Option<Arc<str>>,
     pub squawk: Option<u16>,
+    /// The altitude selected on the autopilot (Comm-B 4,0), ft.
+    pub nav_altitude_ft: Option<u32>,
     /// Age (s) of the newest ADS-B and MLAT measurement, when recent.
     pub ages_s: [Option<f64>; 2],
 }

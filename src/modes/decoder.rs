@@ -80,6 +80,8 @@ pub struct Decoded {
     pub gnss_baro_diff_ft: Option<i32>,
     /// A DF20/21 reply's Comm-B register, inferred with what is known of the aircraft.
     pub commb: Option<Inference>,
+    /// The aircraft reported its velocity by ADS-B lately (set for Comm-B replies).
+    pub adsb_velocity_recent: bool,
 }
 
 impl Decoded {
@@ -273,6 +275,7 @@ impl Decoder {
             nac_p: None,
             gnss_baro_diff_ft: None,
             commb: None,
+            adsb_velocity_recent: false,
         };
         let (own_alt_ft, mb) = match msg.body {
             Body::Altitude { alt_ft, mb, .. } => (alt_ft, mb),
@@ -300,6 +303,7 @@ impl Decoder {
             ac.commb.note(&inference, t);
             self.stats.commb.count(&inference);
             out.commb = Some(inference);
+            out.adsb_velocity_recent = ac.commb.adsb_velocity_recent(t);
             return Ok(out);
         }
         if let Body::Extended(es) = msg.body {
@@ -321,7 +325,7 @@ impl Decoder {
                         ac.gs_kt = Some(gs);
                     }
                     if let (Some(gs), Some(track)) = (v.gs_kt(), v.track_deg()) {
-                        ac.commb.note_velocity(track, gs, t);
+                        ac.commb.note_adsb_velocity(track, gs, t);
                     }
                     if v.gnss_baro_diff_ft.is_some() {
                         ac.gnss_baro_diff_ft = v.gnss_baro_diff_ft;

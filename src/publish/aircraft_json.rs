@@ -68,6 +68,8 @@ struct Aircraft<'a> {
     geom_rate: Option<i64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     squawk: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    nav_altitude_mcp: Option<u32>,
     lat: f64,
     lon: f64,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -218,6 +220,7 @@ fn aircraft(e: &Entry, now: f64) -> Aircraft<'_> {
         track: ro.track_deg.map(|v| round(v, 100.0)),
         geom_rate: ro.geom_rate_fpm,
         squawk: r.squawk.map(|s| format!("{s:04x}")),
+        nav_altitude_mcp: r.nav_altitude_ft,
         lat: round(est.lat, 1e6),
         lon: round(est.lon, 1e6),
         nac_p: r.nac_p,

@@ -275,6 +275,9 @@ fn track(out: &mut Vec<u8>, r: &TrackReport) {
     if let Some(s) = r.squawk {
         o.hex("squawk", Hex::new(s.into(), 4));
     }
+    if let Some(a) = r.nav_altitude_ft {
+        o.int("nav_altitude_mcp", a);
+    }
     o.end();
 }
 
@@ -385,6 +388,8 @@ mod tests {
             flight: Option<&'a str>,
             #[serde(skip_serializing_if = "Option::is_none")]
             squawk: Option<Hex>,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            nav_altitude_mcp: Option<u32>,
         }
 
         pub fn position(p: &PositionReport, receiver: &str) -> String {
@@ -443,6 +448,7 @@ mod tests {
                 adsb_suspect: r.adsb_suspect,
                 flight: r.flight.as_deref().filter(|f| !f.is_empty()),
                 squawk: r.squawk.map(|s| Hex::new(s.into(), 4)),
+                nav_altitude_mcp: r.nav_altitude_ft,
             })
             .unwrap()
         }
@@ -550,6 +556,7 @@ mod tests {
                 adsb_suspect: rng.gen(),
                 flight: maybe(&mut rng, |r| name(r).into()),
                 squawk: maybe(&mut rng, |r| r.gen()),
+                nav_altitude_ft: maybe(&mut rng, |r| r.gen()),
                 ages_s: [None, None],
             };
             let expected = reference::track(&r) + "\n";

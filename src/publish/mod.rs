@@ -48,6 +48,7 @@ pub(crate) mod test_report {
             adsb_suspect: false,
             flight: Some(Arc::from("AFR12")),
             squawk: Some(0x7001),
+            nav_altitude_ft: None,
             ages_s: [None, None],
         }
     }

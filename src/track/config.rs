@@ -129,6 +129,9 @@ pub struct TrackConfig {
     /// proportion to the share of their timing variance that came from
     /// clock synchronisation (which persists from fix to fix).
     pub mlat_sync_inflation: f64,
+    /// Comm-B track and turn reports (BDS 5,0) of aircraft without ADS-B
+    /// velocity feed their tracks as velocity measurements.
+    pub commb_velocity: bool,
     /// Variational-Bayes scale of each source's measurement noise.
     pub vb: bool,
     /// Per-measurement forgetting factor of the VB estimate of MLAT fixes'
@@ -192,6 +195,7 @@ impl Default for TrackConfig {
             adsb_time_sigma_gps_s: 0.01,
             adsb_time_sigma_arrival_s: 0.1,
             mlat_sync_inflation: 4.0,
+            commb_velocity: true,
             vb: true,
             vb_forgetting: 0.95,
             vb_forgetting_adsb: 0.98,

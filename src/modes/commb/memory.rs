@@ -13,6 +13,8 @@ pub struct Memory {
     alt: Option<(i32, f64)>,
     /// Track (deg), ground speed (kt), time.
     velocity: Option<(f64, f64, f64)>,
+    /// When the aircraft last reported its velocity by ADS-B.
+    adsb_velocity_t: Option<f64>,
 }
 
 impl Memory {
@@ -22,6 +24,16 @@ impl Memory {
 
     pub fn note_velocity(&mut self, track_deg: f64, gs_kt: f64, t: f64) {
         self.velocity = Some((track_deg, gs_kt, t));
+    }
+
+    pub fn note_adsb_velocity(&mut self, track_deg: f64, gs_kt: f64, t: f64) {
+        self.note_velocity(track_deg, gs_kt, t);
+        self.adsb_velocity_t = Some(t);
+    }
+
+    /// Whether the aircraft reported its velocity by ADS-B within the last 30 s.
+    pub fn adsb_velocity_recent(&self, t: f64) -> bool {
+        self.adsb_velocity_t.is_some_and(|then| (t - then).abs() <= MAX_AGE_S)
     }
 
     /// Takes up what an identified reply says of the aircraft's motion.
