@@ -106,6 +106,33 @@ fn bench(c: &mut Criterion) {
     });
     g.finish();
 
+    // The particle filter of an aircraft heard by too few receivers: one
+    // update (move, weigh, resample when due) of its default 2,000 particles
+    // by the same three sites' time differences.
+    use fuse1090::track::particle::{SparseConfig, SparseTrack};
+    let pcfg = SparseConfig::default();
+    let toas = |t: f64| {
+        let (lat, lon, h) = at(t);
+        let p = geodetic_to_ecef(lat, lon, h);
+        sites.map(|s| (s, t + fuse1090::geo::ecef_distance(p, s) / fuse1090::mlat::solver::C_AIR, 50e-9))
+    };
+    let mut g = c.benchmark_group("particle");
+    g.throughput(Throughput::Elements(100));
+    g.bench_function("update_2000_particles", |b| {
+        b.iter_batched(
+            || SparseTrack::start(&pcfg, &toas(0.0), 0.0, 9000.0, 1).expect("placed"),
+            |mut s| {
+                for k in 1..=100 {
+                    let t = k as f64 * 0.5;
+                    black_box(s.update(&pcfg, &toas(t), t, 9000.0));
+                }
+                s
+            },
+            criterion::BatchSize::SmallInput,
+        )
+    });
+    g.finish();
+
     // The full tracker: 1,000 aircraft, one ADS-B position each per step.
     use fuse1090::fuse::{FuseConfig, Fuser};
     let mut g = c.benchmark_group("fuser");

@@ -309,6 +309,10 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
         }
         let v: Value = serde_json::from_str(&line).with_context(|| format!("tracks line {}", i + 1))?;
         let source = match v["type"].as_str() {
+            // A particle filter's estimates (too few receivers for a fix) apart.
+            Some("track") if v["sparse"].as_bool() == Some(true) => {
+                format!("{}:sparse", v["source"].as_str().unwrap_or("fused"))
+            }
             Some("track") => v["source"].as_str().unwrap_or("fused").to_string(),
             Some("mlat") => "mlat-fix".to_string(),
             Some("position") => "adsb-report".to_string(),

@@ -30,6 +30,7 @@ pub mod conformance;
 mod hold;
 pub mod methods;
 mod records;
+mod sparse;
 #[cfg(test)]
 mod tests;
 
@@ -41,6 +42,7 @@ use nalgebra::{Matrix2, Vector2};
 
 use crate::track::imm::ImmSpec;
 use crate::track::motion::{Fix2, Motion, MotionTest};
+use crate::track::particle::SparseTrack;
 use crate::track::plane::Plane;
 use crate::track::{Estimate, Measurement, Observation, Outcome, Source, Stage, Track, TrackConfig};
 pub use config::FuseConfig;
@@ -48,7 +50,7 @@ pub use conflict::ConflictConfig;
 pub use conformance::ConformanceConfig;
 use hold::{Waiting, MAX_WAITING};
 pub use methods::{Cross, Method};
-pub use records::{Alert, FuseStats, Output, Sources, TrackReport};
+pub use records::{Alert, FuseStats, Output, Sources, SparseStats, TrackReport};
 
 /// An active conflict's alert stays up to this many times the predicted miss
 /// distance that raises it.
@@ -88,6 +90,11 @@ struct Aircraft {
     flight: Option<Arc<str>>,
     squawk: Option<u16>,
     nav_altitude_ft: Option<u32>,
+    /// Its latest height (WGS-84 m) from an altitude reply, and when.
+    height: Option<(f64, f64)>,
+    /// The particle filter while it has no position, and its next publication.
+    sparse: Option<Box<SparseTrack>>,
+    sparse_due: f64,
     motion: MotionTest,
     motion_plane: Option<Plane>,
     motion_state: Motion,
@@ -123,6 +130,8 @@ pub struct Fuser {
     pub publish_source_tracks: bool,
     /// Single-source tracks are kept (track-to-track fusion, or published).
     singles: bool,
+    /// Particle filters alive (bounded by `sparse.max_filters`).
+    sparse_active: usize,
     stats: FuseStats,
 }
 
@@ -144,6 +153,7 @@ impl Fuser {
             conflicts: FastMap::default(),
             singles,
             publish_source_tracks,
+            sparse_active: 0,
             stats: FuseStats::default(),
         }
     }
@@ -264,6 +274,9 @@ impl Fuser {
                     flight: None,
                     squawk: None,
                     nav_altitude_ft: None,
+                    height: None,
+                    sparse: None,
+                    sparse_due: f64::NEG_INFINITY,
                     motion: self.motion.clone(),
                     motion_plane: None,
                     motion_state: Motion::Unknown,
@@ -279,6 +292,9 @@ impl Fuser {
         }
         let a = self.aircraft.get_mut(&addr).expect("inserted");
         a.last_heard = now;
+        if let Observation::Height { h, .. } = m.obs {
+            a.height = Some((h, m.t));
+        }
         if nac_p.is_some() && m.source == Source::Adsb {
             a.nac_p = nac_p;
         }
@@ -471,10 +487,16 @@ impl Fuser {
     /// A transmission too few receivers heard for a fix: its time differences
     /// go into the tracks of an aircraft already tracked (they cannot start one).
     pub fn on_tdoa(&mut self, g: &crate::mlat::engine::TdoaGroup, now: f64, out: &mut Vec<Output>) {
-        if !self.aircraft.get(&g.addr).is_some_and(|a| a.fused.has_position())
-            || !(2..=3).contains(&g.sites.len())
-        {
+        if !(2..=3).contains(&g.sites.len()) {
             return;
+        }
+        let Some(a) = self.aircraft.get_mut(&g.addr) else { return };
+        if !a.fused.has_position() {
+            return self.sparse_tdoa(g, now, out);
+        }
+        if a.sparse.take().is_some() {
+            self.stats.sparse.handed_over += 1;
+            self.sparse_active -= 1;
         }
         let mut sites = [([0.0; 3], 0.0, 0.0); 3];
         for (d, s) in sites.iter_mut().zip(&g.sites) {
@@ -635,7 +657,13 @@ impl Fuser {
             self.next_sweep = now + 1.0;
             let drop = self.tcfg.drop_after_s;
             let before = self.aircraft.len();
-            self.aircraft.retain(|_, a| now - a.last_heard <= drop);
+            let mut filters_dropped = 0;
+            self.aircraft.retain(|_, a| {
+                let keep = now - a.last_heard <= drop;
+                filters_dropped += (!keep && a.sparse.is_some()) as usize;
+                keep
+            });
+            self.sparse_active -= filters_dropped;
             self.stats.tracks_dropped += (before - self.aircraft.len()) as u64;
         }
     }
@@ -722,6 +750,7 @@ impl Fuser {
             flight: a.flight.clone(),
             squawk: a.squawk,
             nav_altitude_ft: a.nav_altitude_ft,
+            sparse: false,
             ages_s: [Source::Adsb, Source::Mlat].map(|s| Some(age(s).max(0.0)).filter(|age| *age <= window)),
         };
         if let Some(est) = fused {

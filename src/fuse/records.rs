@@ -44,6 +44,8 @@ pub struct TrackReport {
     pub squawk: Option<u16>,
     /// The altitude selected on the autopilot (Comm-B 4,0), ft.
     pub nav_altitude_ft: Option<u32>,
+    /// A particle filter's estimate of an aircraft heard by too few receivers for a fix.
+    pub sparse: bool,
     /// Age (s) of the newest ADS-B and MLAT measurement, when recent.
     pub ages_s: [Option<f64>; 2],
 }
@@ -76,6 +78,24 @@ pub struct FuseStats {
     /// Groups too small for a fix given to tracks as time differences.
     pub tdoa: u64,
     pub conflicts: u64,
+    pub sparse: SparseStats,
+}
+
+/// The particle filters of aircraft heard by too few receivers for a fix.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SparseStats {
+    pub started: u64,
+    pub updates: u64,
+    /// Clouds that no particle of which explained a measurement: started again.
+    pub restarts: u64,
+    pub resamples: u64,
+    /// Groups of an aircraft whose height was not known: not used.
+    pub no_height: u64,
+    pub published: u64,
+    /// Clouds given up for the aircraft's first fix.
+    pub handed_over: u64,
+    /// Aircraft not given a filter: as many as `max_filters` were running.
+    pub refused: u64,
 }
 
 /// One line for people (the offline run's report): what came in, what was
@@ -102,7 +122,17 @@ impl std::fmt::Display for FuseStats {
             self.suspect_excluded,
             self.tdoa,
             self.conflicts
-        )
+        )?;
+        let s = &self.sparse;
+        if s.started > 0 {
+            write!(
+                f,
+                "; sparse geometry: {} particle filters ({} refused, table full), {} updates, {} restarts, \
+                 {} published, {} handed over, {} groups without a height",
+                s.started, s.refused, s.updates, s.restarts, s.published, s.handed_over, s.no_height
+            )?;
+        }
+        Ok(())
     }
 }
 

@@ -325,3 +325,38 @@ fn a_track_mlat_stops_feeding_goes_out_at_once_again() {
     assert!(late.len() > 40);
     assert!(late.iter().all(|(now, t)| now == t), "{late:?}");
 }
+
+/// Time differences of the test flight at `t` at three sites 30 km around its start.
+fn tdoa(addr: u32, t: f64) -> crate::mlat::engine::TdoaGroup {
+    let (lat, lon, h) = at(t);
+    let p = crate::geo::geodetic_to_ecef(lat, lon, h);
+    let sites = [[0.0, 30_000.0], [26_000.0, -15_000.0], [-26_000.0, -15_000.0]].map(|[e, n]| {
+        let (la, lo, ha) = crate::geo::displace(45.0, 5.0, 100.0, [e, n, 0.0]);
+        let s = crate::geo::geodetic_to_ecef(la, lo, ha);
+        (s, t + crate::geo::ecef_distance(p, s) / crate::mlat::solver::C_AIR, 50e-9)
+    });
+    crate::mlat::engine::TdoaGroup { addr, t, sites: sites.to_vec() }
+}
+
+#[test]
+fn particle_filters_are_bounded_and_give_way_to_a_fix() {
+    let mut tcfg = TrackConfig::default();
+    tcfg.sparse.max_filters = 1;
+    let mut f = Fuser::new(FuseConfig::default(), tcfg, false);
+    let mut out = Vec::new();
+    let height = |t| Measurement { t, source: Source::Mlat, obs: Observation::Height { h: 3000.0, var: 100.0 } };
+    for t in [100.0, 101.0, 102.0] {
+        for addr in [1, 2] {
+            f.on_measurement(addr, None, height(t), t, &mut out);
+            f.on_tdoa(&tdoa(addr, t), t, &mut out);
+        }
+    }
+    let s = f.stats().sparse;
+    assert_eq!((s.started, s.updates, s.refused), (1, 2, 3), "{s:?}");
+    // A fix gives aircraft 1 a track: its filter goes, and aircraft 2 may have one.
+    f.on_measurement(1, None, fix(103.0), 103.0, &mut out);
+    f.on_tdoa(&tdoa(1, 103.5), 103.5, &mut out);
+    f.on_tdoa(&tdoa(2, 103.5), 103.5, &mut out);
+    let s = f.stats().sparse;
+    assert_eq!((s.handed_over, s.started), (1, 2), "{s:?}");
+}

@@ -97,6 +97,9 @@ struct Own<'a> {
     period_s: f64,
     #[serde(skip_serializing_if = "Vec::is_empty")]
     conflicts: Vec<String>,
+    /// A particle filter's estimate: too few receivers for a fix.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    sparse: bool,
 }
 
 #[derive(Serialize)]
@@ -238,6 +241,7 @@ fn aircraft(e: &Entry, now: f64) -> Aircraft<'_> {
             motion: r.motion.name(),
             period_s: r.period_s,
             conflicts: e.conflicts.iter().map(|a| format!("{a:06x}")).collect(),
+            sparse: r.sparse,
         },
     }
 }

@@ -278,6 +278,9 @@ fn track(out: &mut Vec<u8>, r: &TrackReport) {
     if let Some(a) = r.nav_altitude_ft {
         o.int("nav_altitude_mcp", a);
     }
+    if r.sparse {
+        o.bool("sparse", true);
+    }
     o.end();
 }
 
@@ -390,6 +393,8 @@ mod tests {
             squawk: Option<Hex>,
             #[serde(skip_serializing_if = "Option::is_none")]
             nav_altitude_mcp: Option<u32>,
+            #[serde(skip_serializing_if = "std::ops::Not::not")]
+            sparse: bool,
         }
 
         pub fn position(p: &PositionReport, receiver: &str) -> String {
@@ -449,6 +454,7 @@ mod tests {
                 flight: r.flight.as_deref().filter(|f| !f.is_empty()),
                 squawk: r.squawk.map(|s| Hex::new(s.into(), 4)),
                 nav_altitude_mcp: r.nav_altitude_ft,
+                sparse: r.sparse,
             })
             .unwrap()
         }
@@ -557,6 +563,7 @@ mod tests {
                 flight: maybe(&mut rng, |r| name(r).into()),
                 squawk: maybe(&mut rng, |r| r.gen()),
                 nav_altitude_ft: maybe(&mut rng, |r| r.gen()),
+                sparse: rng.gen(),
                 ages_s: [None, None],
             };
             let expected = reference::track(&r) + "\n";

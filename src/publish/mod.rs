@@ -49,6 +49,7 @@ pub(crate) mod test_report {
             flight: Some(Arc::from("AFR12")),
             squawk: Some(0x7001),
             nav_altitude_ft: None,
+            sparse: false,
             ages_s: [None, None],
         }
     }

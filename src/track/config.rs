@@ -111,6 +111,8 @@ pub struct TrackConfig {
     pub transition: Option<Vec<Vec<f64>>>,
     /// The switching matrix of aircraft heard only through multilateration.
     pub mlat_only: MlatOnlyConfig,
+    /// The particle filter of aircraft heard by too few receivers for a fix.
+    pub sparse: super::particle::SparseConfig,
     /// Vertical channel (height, climb rate): acceleration noise density (m^2/s^3).
     pub vertical_q: f64,
     /// Output period by NACp 0..=11 (s).
@@ -188,6 +190,7 @@ impl Default for TrackConfig {
             stay: 0.9,
             transition: None,
             mlat_only: MlatOnlyConfig::default(),
+            sparse: Default::default(),
             vertical_q: 0.5,
             period_by_nacp: [1.0, 1.0, 1.0, 1.0, 1.0, 0.8, 0.6, 0.6, 0.6, 0.8, 1.0, 1.0],
             period_default_s: 1.0,
@@ -246,6 +249,9 @@ impl TrackConfig {
                  other models a chance to stay",
                 m.stay_first, m.to_first
             ));
+        }
+        if let Err(e) = self.sparse.validate() {
+            errs.extend(e.lines().map(|l| format!("sparse: {l}")));
         }
         let pos = |v: f64| v.is_finite() && v > 0.0;
         for (name, v) in [

@@ -14,6 +14,7 @@ pub mod kf;
 pub mod measurement;
 pub mod models;
 pub mod motion;
+pub mod particle;
 pub mod plane;
 #[allow(clippy::module_inception)]
 pub mod track;

@@ -1,0 +1,82 @@
+//! Aircraft heard by too few receivers for a fix: their time differences
+//! feed a particle filter ([`crate::track::particle`]) until a fix gives the
+//! aircraft a track, and its estimate is published, flagged `sparse`, while
+//! the cloud has one mode and is tight enough to say where the aircraft is.
+
+use super::{Fuser, Output, TrackReport};
+use crate::mlat::engine::TdoaGroup;
+use crate::track::motion::Motion;
+use crate::track::particle::{SparseOutcome, SparseTrack};
+use crate::track::Estimate;
+
+/// A height older than this does not place the aircraft on its surface (s).
+const HEIGHT_MAX_AGE_S: f64 = 30.0;
+
+impl Fuser {
+    /// One transmission's time differences for an aircraft without a position.
+    pub(super) fn sparse_tdoa(&mut self, g: &TdoaGroup, now: f64, out: &mut Vec<Output>) {
+        let cfg = &self.tcfg.sparse;
+        let Some(a) = self.aircraft.get_mut(&g.addr) else { return };
+        if !cfg.enabled || a.adsb_heard {
+            return;
+        }
+        let Some((h, _)) = a.height.filter(|&(_, t)| (g.t - t).abs() <= HEIGHT_MAX_AGE_S) else {
+            self.stats.sparse.no_height += 1;
+            return;
+        };
+        a.last_heard = now;
+        let stats = &mut self.stats.sparse;
+        let s = match a.sparse.as_mut() {
+            None if self.sparse_active >= cfg.max_filters => {
+                stats.refused += 1;
+                return;
+            }
+            None => {
+                let Some(s) = SparseTrack::start(cfg, &g.sites, g.t, h, g.addr as u64) else { return };
+                stats.started += 1;
+                self.sparse_active += 1;
+                a.sparse.insert(Box::new(s))
+            }
+            Some(s) => {
+                let resamples = s.resamples;
+                match s.update(cfg, &g.sites, g.t, h) {
+                    SparseOutcome::Updated => stats.updates += 1,
+                    SparseOutcome::Restarted => {
+                        stats.restarts += 1;
+                        tracing::info!(
+                            hex = format!("{:06X}", g.addr),
+                            "particle filter lost the aircraft: started again from its newest time differences"
+                        );
+                    }
+                    SparseOutcome::Unusable => return,
+                }
+                stats.resamples += (s.resamples - resamples) as u64;
+                s
+            }
+        };
+        let period = self.tcfg.period_default_s;
+        if g.t < a.sparse_due || s.position_sigma_m() > cfg.publish_sigma_m || !s.unimodal() {
+            return;
+        }
+        a.sparse_due = g.t + period;
+        let (plane, gauss) = s.gaussian();
+        stats.published += 1;
+        out.push(Output::Track(Box::new(TrackReport {
+            id: a.id,
+            addr: g.addr,
+            source: "fused",
+            est: Estimate::new(s.t, plane, gauss, Some(h), 0.0),
+            alt_baro_ft: a.alt_baro_ft,
+            sources: ["mlat"].into_iter().collect(),
+            nac_p: None,
+            period_s: period,
+            motion: Motion::Unknown,
+            adsb_suspect: false,
+            flight: a.flight.clone(),
+            squawk: a.squawk,
+            nav_altitude_ft: a.nav_altitude_ft,
+            sparse: true,
+            ages_s: [None, Some(0.0)],
+        })));
+    }
+}

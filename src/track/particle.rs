@@ -1,0 +1,520 @@
+//! A regularised particle filter for an aircraft heard by too few receivers
+//! for a fix: two or three synchronised sites give one or two time
+//! differences, which with the aircraft's height place it on a curve (one
+//! difference) or at one of two points (two), and its motion across the
+//! hyperbolas of successive transmissions narrows that down. Such a posterior
+//! is banana-shaped or two-peaked for a long time, which a Kalman or
+//! unscented filter (one Gaussian) represents badly; particles represent it
+//! as it is.
+//!
+//! The state of each particle is [east, north, v_east, v_north] on a plane
+//! tangent at the receivers that first heard the aircraft; the height is the
+//! aircraft's own (barometric, corrected), not estimated. Particles start on
+//! the first measurement's surface: points drawn around the sites are pulled
+//! onto it by Gauss-Newton steps, with speeds and headings drawn from an
+//! airliner's range. They move with a constant velocity perturbed by white
+//! acceleration, are weighted by the time differences' likelihood, and are
+//! resampled when the effective sample size falls below a share of their
+//! number, then jittered by a Gaussian kernel of the cloud's own covariance
+//! (Musso's regularisation) so that no diversity is lost, each jittered
+//! position pulled back onto the newest measurement's surface (at a draw of
+//! its noise). A particle beyond a site's radio horizon has no weight: that,
+//! not the time differences, bounds how far out along a hyperbola the
+//! aircraft can be. When no particle explains a measurement the cloud has
+//! lost the aircraft: it starts again from that measurement and counts it.
+
+use nalgebra::{Matrix2, Matrix4, Matrix6, Vector3, Vector4, Vector6};
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+use serde::{Deserialize, Serialize};
+
+use super::kf::Gaussian;
+use super::plane::Plane;
+use crate::mlat::solver::C_AIR;
+
+/// The particle filter's parameters (`[core.track.sparse]`).
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(default, deny_unknown_fields)]
+pub struct SparseConfig {
+    /// Track aircraft heard by too few receivers for a fix with particles.
+    pub enabled: bool,
+    pub particles: usize,
+    /// Resample when the effective sample size falls below this share of the particles.
+    pub resample_below: f64,
+    /// White acceleration of the motion model (m/s^2, per axis).
+    pub accel_ms2: f64,
+    /// Initial speeds are drawn between these (m/s).
+    pub speed_ms: [f64; 2],
+    /// Initial positions are drawn within this of the first sites (m); the
+    /// sites' radio horizons bound them too.
+    pub max_range_m: f64,
+    /// Published only once the cloud's position is this tight (m, 1 sigma,
+    /// largest axis) and has one mode.
+    pub publish_sigma_m: f64,
+    /// Most filters running at once (each holds its particles: 80 kB at 2,000);
+    /// aircraft beyond are refused and counted.
+    pub max_filters: usize,
+}
+
+impl Default for SparseConfig {
+    fn default() -> Self {
+        SparseConfig {
+            enabled: true,
+            particles: 2000,
+            resample_below: 0.5,
+            accel_ms2: 1.0,
+            speed_ms: [60.0, 300.0],
+            max_range_m: 400_000.0,
+            publish_sigma_m: 3_000.0,
+            max_filters: 500,
+        }
+    }
+}
+
+impl SparseConfig {
+    pub fn validate(&self) -> Result<(), String> {
+        let mut errs = Vec::new();
+        if !(100..=100_000).contains(&self.particles) {
+            errs.push(format!("particles = {} must be 100 to 100000", self.particles));
+        }
+        if !(self.resample_below > 0.0 && self.resample_below <= 1.0) {
+            errs.push(format!("resample_below = {} must be in (0, 1]", self.resample_below));
+        }
+        if !(self.speed_ms[0] >= 0.0 && self.speed_ms[0] < self.speed_ms[1]) {
+            errs.push(format!("speed_ms = {:?} must be an increasing pair from 0", self.speed_ms));
+        }
+        for (k, v) in [
+            ("accel_ms2", self.accel_ms2),
+            ("max_range_m", self.max_range_m),
+            ("publish_sigma_m", self.publish_sigma_m),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                errs.push(format!("{k} = {v} must be positive"));
+            }
+        }
+        if errs.is_empty() {
+            Ok(())
+        } else {
+            Err(errs.join("\n"))
+        }
+    }
+}
+
+/// One transmission's sites: ECEF position (m), time of arrival in the common
+/// clock (s), timing sigma (s); 2 or 3 of them.
+pub type Sites<'a> = &'a [([f64; 3], f64, f64)];
+
+/// The time differences in metres, and their covariance's inverse, for sites
+/// taken relative to the first; and how far each site can see an aircraft
+/// at the height given (its radio horizon).
+struct Differences {
+    n: usize,
+    rx: [Vector3<f64>; 3],
+    z: [f64; 2],
+    info: Matrix2<f64>,
+    /// Cholesky factor of the differences' covariance (m), for drawing their noise.
+    chol: Matrix2<f64>,
+    horizon_m: [f64; 3],
+}
+
+/// Radio horizon (m) between antennas at heights `a` and `b` (m) over a
+/// smooth Earth, with the usual 4/3 radius for refraction.
+fn horizon_m(a: f64, b: f64) -> f64 {
+    const K: f64 = 4_122.0;
+    K * (a.max(0.0).sqrt() + b.max(0.0).sqrt())
+}
+
+impl Differences {
+    fn new(plane: &Plane, sites: Sites, h: f64) -> Option<Differences> {
+        let n = sites.len();
+        if !(2..=3).contains(&n) {
+            return None;
+        }
+        let s = |i: usize| sites[i.min(n - 1)];
+        let var = |i: usize| (s(i).2 * C_AIR).powi(2);
+        // Differences against one site share its error.
+        let cov = Matrix2::new(var(1) + var(0), var(0), var(0), var(2) + var(0));
+        let (info, chol) = if n == 2 {
+            (Matrix2::new(1.0 / cov[(0, 0)], 0.0, 0.0, 0.0), Matrix2::new(cov[(0, 0)].sqrt(), 0.0, 0.0, 0.0))
+        } else {
+            (cov.try_inverse()?, cov.cholesky()?.l())
+        };
+        Some(Differences {
+            n,
+            rx: std::array::from_fn(|i| plane.ecef_to_local(s(i).0)),
+            z: std::array::from_fn(|i| (s(i + 1).1 - s(0).1) * C_AIR),
+            info,
+            chol,
+            horizon_m: std::array::from_fn(|i| horizon_m(crate::geo::ecef_to_geodetic(s(i).0).2, h)),
+        })
+    }
+
+    /// Whether every site can see plane position (e, n) at height `h`.
+    fn visible(&self, plane: &Plane, e: f64, n: f64, h: f64) -> bool {
+        let p = Vector3::new(e, n, plane.up_at(e, n, h));
+        (0..self.n).all(|i| (p - self.rx[i]).norm() <= self.horizon_m[i])
+    }
+
+    /// Residuals (m) at plane position (e, n) and height `h`.
+    fn residual(&self, plane: &Plane, e: f64, n: f64, h: f64) -> [f64; 2] {
+        let p = Vector3::new(e, n, plane.up_at(e, n, h));
+        let r0 = (p - self.rx[0]).norm();
+        std::array::from_fn(
+            |i| if i + 1 < self.n { (p - self.rx[i + 1]).norm() - r0 - self.z[i] } else { 0.0 },
+        )
+    }
+
+    /// A draw of the differences' noise (m).
+    fn noise(&self, rng: &mut ChaCha8Rng) -> [f64; 2] {
+        let z = nalgebra::Vector2::new(
+            rng.sample::<f64, _>(StandardNormal),
+            rng.sample::<f64, _>(StandardNormal),
+        );
+        let v = self.chol * z;
+        [v[0], v[1]]
+    }
+
+    /// Chi-square of the residuals (1 or 2 degrees of freedom).
+    fn chi2(&self, r: [f64; 2]) -> f64 {
+        let v = nalgebra::Vector2::new(r[0], r[1]);
+        (v.transpose() * self.info * v)[0]
+    }
+}
+
+/// What became of one measurement.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SparseOutcome {
+    Updated,
+    /// No particle explained it: the cloud started again from it.
+    Restarted,
+    /// Not usable (sites, or the cloud could not be placed on it).
+    Unusable,
+}
+
+/// The particle filter of one aircraft.
+#[derive(Clone, Debug)]
+pub struct SparseTrack {
+    plane: Plane,
+    pub t: f64,
+    x: Vec<Vector4<f64>>,
+    /// Normalised weights.
+    w: Vec<f64>,
+    rng: ChaCha8Rng,
+    pub restarts: u32,
+    pub resamples: u32,
+}
+
+/// Gauss-Newton steps pulling a drawn point onto a measurement's surface.
+const PULL_STEPS: usize = 12;
+/// How far copies of too few placed particles are moved before being pulled back (m).
+const FILL_JITTER_M: f64 = 2_000.0;
+/// A measurement no particle explains better than this (chi-square) restarts the cloud.
+const LOST_CHI2: f64 = 100.0;
+
+impl SparseTrack {
+    /// A cloud on the surface of the first measurement (`None` when the sites
+    /// are unusable or no drawn point reaches the surface).
+    pub fn start(cfg: &SparseConfig, sites: Sites, t: f64, h: f64, seed: u64) -> Option<SparseTrack> {
+        let centre = sites.iter().fold([0.0; 3], |a, s| [a[0] + s.0[0], a[1] + s.0[1], a[2] + s.0[2]]);
+        let k = sites.len().max(1) as f64;
+        let (lat, lon, _) = crate::geo::ecef_to_geodetic(centre.map(|c| c / k));
+        let mut s = SparseTrack {
+            plane: Plane::new(lat, lon, h),
+            t,
+            x: Vec::new(),
+            w: Vec::new(),
+            rng: <ChaCha8Rng as rand::SeedableRng>::seed_from_u64(seed),
+            restarts: 0,
+            resamples: 0,
+        };
+        s.place(cfg, sites, h).then_some(s)
+    }
+
+    /// Draws the particles onto the measurement's surface; false if none got there.
+    fn place(&mut self, cfg: &SparseConfig, sites: Sites, h: f64) -> bool {
+        let Some(d) = Differences::new(&self.plane, sites, h) else { return false };
+        let mut x = Vec::with_capacity(cfg.particles);
+        let mut tries = 0;
+        while x.len() < cfg.particles && tries < cfg.particles * 4 {
+            tries += 1;
+            // Uniform over the disc around the sites.
+            let r = cfg.max_range_m * self.rng.gen::<f64>().sqrt();
+            let a = self.rng.gen::<f64>() * std::f64::consts::TAU;
+            let target = d.noise(&mut self.rng);
+            let Some((e, n)) = pull(&d, &self.plane, r * a.cos(), r * a.sin(), h, target) else { continue };
+            let speed = self.rng.gen_range(cfg.speed_ms[0]..cfg.speed_ms[1]);
+            let heading = self.rng.gen::<f64>() * std::f64::consts::TAU;
+            x.push(Vector4::new(e, n, speed * heading.sin(), speed * heading.cos()));
+        }
+        if x.is_empty() {
+            return false;
+        }
+        // Fill up to the count by copies of the placed ones, moved a little
+        // along the surface.
+        let placed = x.len();
+        while x.len() < cfg.particles {
+            let mut c = x[self.rng.gen_range(0..placed)];
+            let (de, dn): (f64, f64) = (self.rng.sample(StandardNormal), self.rng.sample(StandardNormal));
+            let target = d.noise(&mut self.rng);
+            let (e0, n0) = (c[0] + FILL_JITTER_M * de, c[1] + FILL_JITTER_M * dn);
+            if let Some((e, n)) = pull(&d, &self.plane, e0, n0, h, target) {
+                c[0] = e;
+                c[1] = n;
+            }
+            x.push(c);
+        }
+        self.w = vec![1.0 / x.len() as f64; x.len()];
+        self.x = x;
+        true
+    }
+
+    /// Moves the cloud to `t` and weighs it by one transmission's time
+    /// differences, at the aircraft's height `h` (m).
+    pub fn update(&mut self, cfg: &SparseConfig, sites: Sites, t: f64, h: f64) -> SparseOutcome {
+        let Some(d) = Differences::new(&self.plane, sites, h) else { return SparseOutcome::Unusable };
+        let dt = (t - self.t).max(0.0);
+        self.t = self.t.max(t);
+        let q = cfg.accel_ms2;
+        for x in &mut self.x {
+            let (ae, an): (f64, f64) = (self.rng.sample(StandardNormal), self.rng.sample(StandardNormal));
+            let (ae, an) = (ae * q, an * q);
+            x[0] += x[2] * dt + 0.5 * ae * dt * dt;
+            x[1] += x[3] * dt + 0.5 * an * dt * dt;
+            x[2] += ae * dt;
+            x[3] += an * dt;
+        }
+        // Beyond a site's horizon, or faster than any airliner: impossible.
+        let max_speed = cfg.speed_ms[1] * 1.25;
+        let chi: Vec<f64> = self
+            .x
+            .iter()
+            .map(|x| {
+                if !d.visible(&self.plane, x[0], x[1], h) || x[2].hypot(x[3]) > max_speed {
+                    f64::INFINITY
+                } else {
+                    d.chi2(d.residual(&self.plane, x[0], x[1], h))
+                }
+            })
+            .collect();
+        let best = chi.iter().cloned().fold(f64::INFINITY, f64::min);
+        // NaN included: no particle explained it.
+        if best.is_nan() || best > LOST_CHI2 {
+            self.restarts += 1;
+            return if self.place(cfg, sites, h) {
+                SparseOutcome::Restarted
+            } else {
+                SparseOutcome::Unusable
+            };
+        }
+        // Relative to the best particle: no underflow.
+        for (w, c) in self.w.iter_mut().zip(&chi) {
+            *w *= (-0.5 * (c - best)).exp();
+        }
+        let sum: f64 = self.w.iter().sum();
+        self.w.iter_mut().for_each(|w| *w /= sum);
+        let ess = 1.0 / self.w.iter().map(|w| w * w).sum::<f64>();
+        if ess < cfg.resample_below * self.x.len() as f64 {
+            self.resample(&d, h);
+        }
+        SparseOutcome::Updated
+    }
+
+    /// Systematic resampling, then a Gaussian kernel jitter of the cloud's
+    /// covariance at Silverman/Musso's bandwidth for 4 dimensions. The cloud
+    /// of one or two time differences is a thin curved sheet that a kernel
+    /// of its overall covariance would mostly leave: each jittered position is
+    /// pulled back onto the newest measurement's surface (a move that keeps
+    /// what it explains).
+    fn resample(&mut self, d: &Differences, h: f64) {
+        self.resamples += 1;
+        let (_, cov) = self.moments();
+        let n = self.x.len();
+        let mut out = Vec::with_capacity(n);
+        let u0 = self.rng.gen::<f64>() / n as f64;
+        let (mut acc, mut i) = (self.w[0], 0);
+        for k in 0..n {
+            let u = u0 + k as f64 / n as f64;
+            while u > acc && i + 1 < n {
+                i += 1;
+                acc += self.w[i];
+            }
+            out.push(self.x[i]);
+        }
+        let bandwidth = (4.0 / (n as f64 * 6.0)).powf(1.0 / 8.0);
+        // A floor, so that a cloud of copies spreads again.
+        let floor = Matrix4::from_diagonal(&Vector4::new(50.0f64.powi(2), 50.0f64.powi(2), 4.0, 4.0));
+        if let Some(l) = (cov * (bandwidth * bandwidth) + floor).cholesky() {
+            let l = l.l();
+            for x in &mut out {
+                let z = Vector4::from_fn(|_, _| self.rng.sample::<f64, _>(StandardNormal));
+                let moved = *x + l * z;
+                // Where the surface cannot be reached from there (time
+                // differences nearly parallel far out), the jittered state as it is.
+                let target = d.noise(&mut self.rng);
+                *x = match pull(d, &self.plane, moved[0], moved[1], h, target) {
+                    Some((e, n)) => Vector4::new(e, n, moved[2], moved[3]),
+                    None => moved,
+                };
+            }
+        }
+        self.x = out;
+        self.w = vec![1.0 / n as f64; n];
+    }
+
+    /// Weighted mean and covariance of the state.
+    pub fn moments(&self) -> (Vector4<f64>, Matrix4<f64>) {
+        let mean = self.x.iter().zip(&self.w).fold(Vector4::zeros(), |m, (x, w)| m + x * *w);
+        let cov = self.x.iter().zip(&self.w).fold(Matrix4::zeros(), |c, (x, w)| {
+            let d = x - mean;
+            c + d * d.transpose() * *w
+        });
+        (mean, cov)
+    }
+
+    /// Whether the cloud's position has one mode: split along its major axis
+    /// at the mean, the two halves' centres are less than four of their own
+    /// spreads apart (a two-peaked cloud's halves are its peaks, far apart
+    /// for their width; a Gaussian's are 2.65 of them apart).
+    pub fn unimodal(&self) -> bool {
+        let (mean, cov) = self.moments();
+        let pos = cov.fixed_view::<2, 2>(0, 0).into_owned();
+        let eig = pos.symmetric_eigen();
+        let k = if eig.eigenvalues[0] > eig.eigenvalues[1] { 0 } else { 1 };
+        let axis = eig.eigenvectors.column(k).into_owned();
+        let mut halves = [(0.0, 0.0, 0.0); 2];
+        for (x, w) in self.x.iter().zip(&self.w) {
+            let s = (x[0] - mean[0]) * axis[0] + (x[1] - mean[1]) * axis[1];
+            let h = &mut halves[(s > 0.0) as usize];
+            h.0 += w;
+            h.1 += w * s;
+            h.2 += w * s * s;
+        }
+        let stats = halves.map(|(w, s, ss)| {
+            if w <= 0.0 {
+                (0.0, 0.0)
+            } else {
+                let m = s / w;
+                (m, (ss / w - m * m).max(0.0))
+            }
+        });
+        let spread = ((stats[0].1 + stats[1].1) / 2.0).sqrt();
+        (stats[1].0 - stats[0].0) < 4.0 * spread.max(1.0) || halves.iter().any(|h| h.0 < 0.05)
+    }
+
+    /// The cloud as a Gaussian of the trackers' state [e, n, ve, vn, ae, an]
+    /// in its plane (no acceleration), for publication.
+    pub fn gaussian(&self) -> (Plane, Gaussian) {
+        let (m, cov) = self.moments();
+        let mut g = Gaussian { x: Vector6::new(m[0], m[1], m[2], m[3], 0.0, 0.0), p: Matrix6::zeros() };
+        g.p.fixed_view_mut::<4, 4>(0, 0).copy_from(&cov);
+        (self.plane, g)
+    }
+
+    pub fn position_sigma_m(&self) -> f64 {
+        let (_, cov) = self.moments();
+        cov.fixed_view::<2, 2>(0, 0).into_owned().symmetric_eigen().eigenvalues.max().max(0.0).sqrt()
+    }
+}
+
+/// A plane point moved by Gauss-Newton steps to where the residuals are
+/// `target` (a draw of the measurement's noise: with two differences the
+/// surface is a point at the height, and every particle pulled exactly onto
+/// it would be the same), if it gets there within the sites' horizons.
+fn pull(
+    d: &Differences,
+    plane: &Plane,
+    mut e: f64,
+    mut n: f64,
+    h: f64,
+    target: [f64; 2],
+) -> Option<(f64, f64)> {
+    for _ in 0..PULL_STEPS {
+        let (res, jac) = residual_jacobian(d, plane, e, n, h);
+        let res = [res[0] - target[0], res[1] - target[1]];
+        let step = if d.n == 2 {
+            let g = jac[0];
+            let gg = g[0] * g[0] + g[1] * g[1];
+            if gg < 1e-12 {
+                return None;
+            }
+            [res[0] * g[0] / gg, res[0] * g[1] / gg]
+        } else {
+            let j = Matrix2::new(jac[0][0], jac[0][1], jac[1][0], jac[1][1]);
+            let s = j.try_inverse()? * nalgebra::Vector2::new(res[0], res[1]);
+            [s[0], s[1]]
+        };
+        e -= step[0];
+        n -= step[1];
+    }
+    (d.visible(plane, e, n, h) && d.chi2(d.residual(plane, e, n, h)) <= 9.0).then_some((e, n))
+}
+
+/// Residuals and their gradients in (e, n) at a plane point.
+fn residual_jacobian(d: &Differences, plane: &Plane, e: f64, n: f64, h: f64) -> ([f64; 2], [[f64; 2]; 2]) {
+    let p = Vector3::new(e, n, plane.up_at(e, n, h));
+    let unit = |i: usize| {
+        let v = p - d.rx[i];
+        let r = v.norm().max(1.0);
+        [v[0] / r, v[1] / r]
+    };
+    let u0 = unit(0);
+    let res = d.residual(plane, e, n, h);
+    let jac = std::array::from_fn(|i| {
+        let u = unit((i + 1).min(d.n - 1));
+        [u[0] - u0[0], u[1] - u0[1]]
+    });
+    (res, jac)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geo::geodetic_to_ecef;
+
+    /// Three sites 60 km apart, an aircraft 80 km from them at 10 km flying
+    /// east at 200 m/s, a transmission a second: the cloud must find it and
+    /// say how well it knows it.
+    #[test]
+    fn three_sites_place_the_aircraft() {
+        let (lat0, lon0, h) = (43.6, 1.45, 10_000.0);
+        let plane = Plane::new(lat0, lon0, 0.0);
+        let site = |e: f64, n: f64| {
+            let (lat, lon) = plane.to_geodetic(e, n);
+            geodetic_to_ecef(lat, lon, 150.0)
+        };
+        let rx = [site(0.0, 30_000.0), site(26_000.0, -15_000.0), site(-26_000.0, -15_000.0)];
+        let sigma_s = 50e-9;
+        let mut noise = <ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
+        let sites_at = |t: f64, noise: &mut ChaCha8Rng| {
+            let (lat, lon) = plane.to_geodetic(-40_000.0 + 200.0 * t, 70_000.0);
+            let p = geodetic_to_ecef(lat, lon, h);
+            rx.map(|r| {
+                let toa = t
+                    + crate::geo::ecef_distance(p, r) / C_AIR
+                    + sigma_s * noise.sample::<f64, _>(StandardNormal);
+                (r, toa, sigma_s)
+            })
+        };
+        let cfg = SparseConfig { enabled: true, ..Default::default() };
+        let mut s = SparseTrack::start(&cfg, &sites_at(0.0, &mut noise), 0.0, h, 1).unwrap();
+        for k in 1..=60 {
+            let t = k as f64;
+            assert_ne!(s.update(&cfg, &sites_at(t, &mut noise), t, h), SparseOutcome::Unusable);
+        }
+        let (m, cov) = s.moments();
+        let (lat, lon) = plane.to_geodetic(-40_000.0 + 200.0 * 60.0, 70_000.0);
+        let at = s.gaussian().0.to_en(lat, lon);
+        let err = nalgebra::Vector2::new(m[0] - at[0], m[1] - at[1]);
+        let p = cov.fixed_view::<2, 2>(0, 0).into_owned();
+        let nees = (err.transpose() * p.try_inverse().unwrap() * err)[0];
+        assert!(err.norm() < 1_000.0, "{} m off", err.norm());
+        assert!(nees < 13.8, "NEES {nees} (99.9% of chi-square 2)");
+        assert!(s.unimodal());
+        // A transmission 6 km of range off: no particle explains it.
+        let far =
+            sites_at(0.0, &mut noise).map(|(r, toa, sg)| (r, toa + if r == rx[0] { 20e-6 } else { 0.0 }, sg));
+        assert_eq!(s.update(&cfg, &far, 61.0, h), SparseOutcome::Restarted);
+        assert_eq!(s.restarts, 1);
+    }
+}
