@@ -5,11 +5,11 @@
 //! the same run without them, on a seed the scenario file does not use; and
 //! their selected altitudes (4,0) in the published tracks.
 
+mod common;
+
 use fuse1090::core::CoreConfig;
 use fuse1090::eval::montecarlo::run_in_memory;
 use fuse1090::eval::{evaluate, Row, Truth};
-use fuse1090::sim::scenario::Scenario;
-use fuse1090::sim::simulate;
 
 fn mode_s_only(capture: &[u8], truth: &Truth, commb_velocity: bool) -> (Row, Vec<u8>) {
     let mut cfg = CoreConfig::default();
@@ -21,13 +21,7 @@ fn mode_s_only(capture: &[u8], truth: &Truth, commb_velocity: bool) -> (Row, Vec
 
 #[test]
 fn commb_velocities_sharpen_mode_s_only_tracks() {
-    let path =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/scenarios/network-rough-ehs.toml");
-    let mut s = Scenario::load(&path).unwrap();
-    s.seed = 41;
-    let (mut capture, mut truth) = (Vec::new(), Vec::new());
-    simulate(&s, &mut capture, &mut truth).unwrap();
-    let truth = Truth::read(truth.as_slice()).unwrap();
+    let (capture, truth) = common::simulated("network-rough-ehs", 41);
     let (with, out) = mode_s_only(&capture, &truth, true);
     let (without, _) = mode_s_only(&capture, &truth, false);
     println!(

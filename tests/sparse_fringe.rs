@@ -5,11 +5,11 @@
 //! published (flagged `sparse`) with a covariance that holds its error, and
 //! the tracks made from fixes are the same as without.
 
+mod common;
+
 use fuse1090::core::CoreConfig;
 use fuse1090::eval::montecarlo::run_in_memory;
 use fuse1090::eval::{evaluate, Report, Truth};
-use fuse1090::sim::scenario::Scenario;
-use fuse1090::sim::simulate;
 
 fn run(capture: &[u8], truth: &Truth, sparse: bool) -> (Report, Vec<serde_json::Value>) {
     let mut cfg = CoreConfig::default();
@@ -22,12 +22,7 @@ fn run(capture: &[u8], truth: &Truth, sparse: bool) -> (Report, Vec<serde_json::
 
 #[test]
 fn too_few_receivers_for_a_fix_still_give_an_honest_estimate() {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/scenarios/fringe.toml");
-    let mut s = Scenario::load(&path).unwrap();
-    s.seed = 65;
-    let (mut capture, mut truth) = (Vec::new(), Vec::new());
-    simulate(&s, &mut capture, &mut truth).unwrap();
-    let truth = Truth::read(truth.as_slice()).unwrap();
+    let (capture, truth) = common::simulated("fringe", 65);
     let (with, lines) = run(&capture, &truth, true);
     let (without, _) = run(&capture, &truth, false);
     let row = |r: &Report, source: &str| r.overall.iter().find(|x| x.source == source).cloned();

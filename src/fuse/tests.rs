@@ -344,7 +344,8 @@ fn particle_filters_are_bounded_and_give_way_to_a_fix() {
     tcfg.sparse.max_filters = 1;
     let mut f = Fuser::new(FuseConfig::default(), tcfg, false);
     let mut out = Vec::new();
-    let height = |t| Measurement { t, source: Source::Mlat, obs: Observation::Height { h: 3000.0, var: 100.0 } };
+    let height =
+        |t| Measurement { t, source: Source::Mlat, obs: Observation::Height { h: 3000.0, var: 100.0 } };
     for t in [100.0, 101.0, 102.0] {
         for addr in [1, 2] {
             f.on_measurement(addr, None, height(t), t, &mut out);

@@ -54,6 +54,17 @@ pub fn python_with(module: &str, unchecked: &str) -> Option<PathBuf> {
     None
 }
 
+/// A fixture scenario (`fixtures/scenarios/NAME.toml`) simulated on another
+/// seed than its own (a world nothing was tuned on): its capture and truth.
+pub fn simulated(name: &str, seed: u64) -> (Vec<u8>, fuse1090::eval::Truth) {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(format!("fixtures/scenarios/{name}.toml"));
+    let mut s = fuse1090::sim::scenario::Scenario::load(&path).unwrap();
+    s.seed = seed;
+    let (mut capture, mut truth) = (Vec::new(), Vec::new());
+    fuse1090::sim::simulate(&s, &mut capture, &mut truth).unwrap();
+    (capture, fuse1090::eval::Truth::read(truth.as_slice()).unwrap())
+}
+
 /// A scratch directory for one test, removed when the returned guard drops
 /// (also when the test panics), so that repeated runs do not fill the disk.
 pub fn scratch(name: &str) -> tempfile::TempDir {
