@@ -36,10 +36,18 @@ fn too_few_receivers_for_a_fix_still_give_an_honest_estimate() {
     let sparse = row(&with, "fused:sparse").expect("sparse estimates");
     let nees = sparse.nees.unwrap();
     println!(
-        "sparse estimates: {} of {} aircraft, RMSE {:.0} m, NEES {:.2} (band {:?}), continuity {:.3}",
-        sparse.n, sparse.aircraft, sparse.h_rmse_m, nees, sparse.nees_band, sparse.continuity
+        "sparse estimates: {} of {} aircraft, RMSE {:.0} m, NEES {:.2} (band {:?}), continuity {:.3}, within 1 km {:.3}",
+        sparse.n,
+        sparse.aircraft,
+        sparse.h_rmse_m,
+        nees,
+        sparse.nees_band,
+        sparse.continuity,
+        sparse.continuity_1km
     );
     assert!(sparse.n >= 30, "{} sparse estimates", sparse.n);
+    // Some of the time the aircraft had no estimate at all before is now covered within 1 km.
+    assert!(sparse.continuity_1km > 0.02, "{}", sparse.continuity_1km);
     let band = sparse.nees_band.unwrap();
     assert!(nees > band[0] * 0.75 && nees < band[1] * 1.25, "NEES {nees} against {band:?}");
     for v in lines.iter().filter(|v| v["sparse"] == true) {

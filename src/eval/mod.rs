@@ -169,6 +169,8 @@ pub struct Row {
     #[serde(skip)]
     pub nees_samples: Vec<(f64, f64)>,
     pub continuity: f64,
+    /// The same, counting only estimates within 1 km of the truth.
+    pub continuity_1km: f64,
     pub breaks: usize,
     pub false_tracks: usize,
     /// MLAT fixes, given the scenario: RMS of the Cramér-Rao bound of each
@@ -381,34 +383,43 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
         e.0.nees.extend(acc.nees);
         e.0.crb.extend(acc.crb);
     }
-    let make_row =
-        |source: &str, hex: &str, aircraft: usize, acc: &Acc, cont: f64, breaks: usize, false_tracks| Row {
-            source: source.to_string(),
-            hex: hex.to_string(),
-            aircraft,
-            n: acc.h_err.len(),
-            h_rmse_m: rms(&acc.h_err),
-            h_p95_m: p95(&acc.h_err),
-            v_rmse_m: (!acc.v_err.is_empty()).then(|| rms(&acc.v_err)),
-            nees: (!acc.nees.is_empty())
-                .then(|| acc.nees.iter().map(|(_, x)| x).sum::<f64>() / acc.nees.len() as f64),
-            nees_band: (!acc.nees.is_empty()).then(|| nees_band(acc.nees.len(), 2.0)),
-            nees_samples: acc.nees.clone(),
-            continuity: cont,
-            breaks,
-            false_tracks,
-            crb_m: (!acc.crb.is_empty()).then(|| (acc.crb.iter().sum::<f64>() / acc.crb.len() as f64).sqrt()),
-            crb_ratio: (!acc.crb.is_empty() && acc.crb.len() == acc.h_err.len())
-                .then(|| rms(&acc.h_err) / (acc.crb.iter().sum::<f64>() / acc.crb.len() as f64).sqrt()),
-        };
+    let make_row = |source: &str,
+                    hex: &str,
+                    aircraft: usize,
+                    acc: &Acc,
+                    (cont, cont_1km): (f64, f64),
+                    breaks: usize,
+                    false_tracks| Row {
+        source: source.to_string(),
+        hex: hex.to_string(),
+        aircraft,
+        n: acc.h_err.len(),
+        h_rmse_m: rms(&acc.h_err),
+        h_p95_m: p95(&acc.h_err),
+        v_rmse_m: (!acc.v_err.is_empty()).then(|| rms(&acc.v_err)),
+        nees: (!acc.nees.is_empty())
+            .then(|| acc.nees.iter().map(|(_, x)| x).sum::<f64>() / acc.nees.len() as f64),
+        nees_band: (!acc.nees.is_empty()).then(|| nees_band(acc.nees.len(), 2.0)),
+        nees_samples: acc.nees.clone(),
+        continuity: cont,
+        continuity_1km: cont_1km,
+        breaks,
+        false_tracks,
+        crb_m: (!acc.crb.is_empty()).then(|| (acc.crb.iter().sum::<f64>() / acc.crb.len() as f64).sqrt()),
+        crb_ratio: (!acc.crb.is_empty() && acc.crb.len() == acc.h_err.len())
+            .then(|| rms(&acc.h_err) / (acc.crb.iter().sum::<f64>() / acc.crb.len() as f64).sqrt()),
+    };
     // Before `coverage` sorts the times apart from their errors.
     let fusion = compare_fusion(&per);
     let mut aircraft_rows = Vec::new();
-    let mut overall: BTreeMap<String, (Acc, usize, f64, usize, usize)> = BTreeMap::new();
+    let mut overall: BTreeMap<String, (Acc, usize, (f64, f64), usize, usize)> = BTreeMap::new();
     for ((source, hex), (mut acc, false_tracks)) in per {
         let span = truth.span(&hex).unwrap_or((0.0, 0.0));
+        let mut near: Vec<f64> =
+            acc.times.iter().zip(&acc.h_err).filter(|&(_, &e)| e <= 1000.0).map(|(&t, _)| t).collect();
+        let (cont_1km, _) = coverage(&mut near, span);
         let (cont, breaks) = coverage(&mut acc.times, span);
-        aircraft_rows.push(make_row(&source, &hex, 1, &acc, cont, breaks, false_tracks));
+        aircraft_rows.push(make_row(&source, &hex, 1, &acc, (cont, cont_1km), breaks, false_tracks));
         // The tracks of aircraft without ADS-B also in a row of their own:
         // what multilateration and Mode S alone give.
         let mode_s_only = matches!(source.as_str(), "fused" | "mlat") && truth.adsb.get(&hex) == Some(&false);
@@ -420,15 +431,16 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
             o.0.nees.extend(&acc.nees);
             o.0.crb.extend(&acc.crb);
             o.1 += 1;
-            o.2 += cont;
+            o.2 .0 += cont;
+            o.2 .1 += cont_1km;
             o.3 += breaks;
             o.4 += false_tracks;
         }
     }
     let overall = overall
         .into_iter()
-        .map(|(source, (acc, n, cont, breaks, ft))| {
-            make_row(&source, "all", n, &acc, cont / n as f64, breaks, ft)
+        .map(|(source, (acc, n, (cont, cont_1km), breaks, ft))| {
+            make_row(&source, "all", n, &acc, (cont / n as f64, cont_1km / n as f64), breaks, ft)
         })
         .collect();
     let receivers = receivers::compare(&truth.receivers, &latest_receiver);
@@ -442,7 +454,7 @@ fn fmt_opt(v: Option<f64>, prec: usize) -> String {
 impl std::fmt::Display for Report {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let header = format!(
-            "{:<18} {:>6} {:>8} {:>9} {:>8} {:>8} {:>7} {:>15} {:>6} {:>6} {:>5} {:>15}",
+            "{:<18} {:>6} {:>8} {:>9} {:>8} {:>8} {:>7} {:>15} {:>6} {:>6} {:>6} {:>5} {:>15}",
             "source",
             "hex",
             "n",
@@ -452,13 +464,14 @@ impl std::fmt::Display for Report {
             "nees",
             "nees_95%",
             "cont",
+            "cont1k",
             "breaks",
             "false",
             "crb_m (ratio)"
         );
         let line = |r: &Row| {
             format!(
-                "{:<18} {:>6} {:>8} {:>9.2} {:>8.2} {:>8} {:>7} {:>15} {:>6.3} {:>6} {:>5} {:>15}",
+                "{:<18} {:>6} {:>8} {:>9.2} {:>8.2} {:>8} {:>7} {:>15} {:>6.3} {:>6.3} {:>6} {:>5} {:>15}",
                 r.source,
                 if r.hex == "all" { format!("{} ac", r.aircraft) } else { r.hex.clone() },
                 r.n,
@@ -468,6 +481,7 @@ impl std::fmt::Display for Report {
                 fmt_opt(r.nees, 2),
                 r.nees_band.map_or("-".into(), |b| format!("[{:.2}, {:.2}]", b[0], b[1])),
                 r.continuity,
+                r.continuity_1km,
                 r.breaks,
                 r.false_tracks,
                 match (r.crb_m, r.crb_ratio) {
@@ -594,6 +608,8 @@ mod tests {
         assert!((row.v_rmse_m.unwrap() - 10.0).abs() < 1e-6);
         assert!((row.nees.unwrap() - 1.0).abs() < 0.01);
         assert!((row.continuity - 1.0).abs() < 1e-9);
+        // 100 m off: all within 1 km.
+        assert!((row.continuity_1km - 1.0).abs() < 1e-9);
         assert_eq!(r.unknown_records, 1);
     }
 }
