@@ -125,6 +125,18 @@ struct Acc {
     crb: Vec<f64>,
 }
 
+/// One source's aircraft pooled for its overall row: their errors, how many,
+/// their continuities summed (averaged at the end), breaks and false tracks.
+#[derive(Default)]
+struct Pooled {
+    acc: Acc,
+    aircraft: usize,
+    cont: f64,
+    cont_1km: f64,
+    breaks: usize,
+    false_tracks: usize,
+}
+
 /// Receivers of a simulated world, for the Cramér-Rao bound of MLAT fixes:
 /// true ECEF position and true timing sigma (jitter and quantisation), by id.
 pub struct Geometry {
@@ -412,7 +424,7 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
     // Before `coverage` sorts the times apart from their errors.
     let fusion = compare_fusion(&per);
     let mut aircraft_rows = Vec::new();
-    let mut overall: BTreeMap<String, (Acc, usize, (f64, f64), usize, usize)> = BTreeMap::new();
+    let mut overall: BTreeMap<String, Pooled> = BTreeMap::new();
     for ((source, hex), (mut acc, false_tracks)) in per {
         let span = truth.span(&hex).unwrap_or((0.0, 0.0));
         let mut near: Vec<f64> =
@@ -426,21 +438,30 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
         let rows = [Some(source.clone()), mode_s_only.then(|| format!("{source}:mode-s-only"))];
         for key in rows.into_iter().flatten() {
             let o = overall.entry(key).or_default();
-            o.0.h_err.extend(&acc.h_err);
-            o.0.v_err.extend(&acc.v_err);
-            o.0.nees.extend(&acc.nees);
-            o.0.crb.extend(&acc.crb);
-            o.1 += 1;
-            o.2 .0 += cont;
-            o.2 .1 += cont_1km;
-            o.3 += breaks;
-            o.4 += false_tracks;
+            o.acc.h_err.extend(&acc.h_err);
+            o.acc.v_err.extend(&acc.v_err);
+            o.acc.nees.extend(&acc.nees);
+            o.acc.crb.extend(&acc.crb);
+            o.aircraft += 1;
+            o.cont += cont;
+            o.cont_1km += cont_1km;
+            o.breaks += breaks;
+            o.false_tracks += false_tracks;
         }
     }
     let overall = overall
         .into_iter()
-        .map(|(source, (acc, n, (cont, cont_1km), breaks, ft))| {
-            make_row(&source, "all", n, &acc, (cont / n as f64, cont_1km / n as f64), breaks, ft)
+        .map(|(source, o)| {
+            let n = o.aircraft as f64;
+            make_row(
+                &source,
+                "all",
+                o.aircraft,
+                &o.acc,
+                (o.cont / n, o.cont_1km / n),
+                o.breaks,
+                o.false_tracks,
+            )
         })
         .collect();
     let receivers = receivers::compare(&truth.receivers, &latest_receiver);
