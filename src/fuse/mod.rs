@@ -95,6 +95,8 @@ struct Aircraft {
     /// The particle filter while it has no position, and its next publication.
     sparse: Option<Box<SparseTrack>>,
     sparse_due: f64,
+    /// When its groups first came too small for a fix while it had no position.
+    sparse_since: Option<f64>,
     motion: MotionTest,
     motion_plane: Option<Plane>,
     motion_state: Motion,
@@ -277,6 +279,7 @@ impl Fuser {
                     height: None,
                     sparse: None,
                     sparse_due: f64::NEG_INFINITY,
+                    sparse_since: None,
                     motion: self.motion.clone(),
                     motion_plane: None,
                     motion_state: Motion::Unknown,

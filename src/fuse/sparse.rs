@@ -25,8 +25,10 @@ impl Fuser {
             return;
         };
         a.last_heard = now;
+        let since = *a.sparse_since.get_or_insert(g.t);
         let stats = &mut self.stats.sparse;
         let s = match a.sparse.as_mut() {
+            None if g.t - since < cfg.start_after_s => return,
             None if self.sparse_active >= cfg.max_filters => {
                 stats.refused += 1;
                 return;

@@ -342,11 +342,13 @@ fn tdoa(addr: u32, t: f64) -> crate::mlat::engine::TdoaGroup {
 fn particle_filters_are_bounded_and_give_way_to_a_fix() {
     let mut tcfg = TrackConfig::default();
     tcfg.sparse.max_filters = 1;
+    // A filter starts once an aircraft's groups have been too small for a fix for 1 s.
+    tcfg.sparse.start_after_s = 1.0;
     let mut f = Fuser::new(FuseConfig::default(), tcfg, false);
     let mut out = Vec::new();
     let height =
         |t| Measurement { t, source: Source::Mlat, obs: Observation::Height { h: 3000.0, var: 100.0 } };
-    for t in [100.0, 101.0, 102.0] {
+    for t in [99.0, 100.0, 101.0, 102.0] {
         for addr in [1, 2] {
             f.on_measurement(addr, None, height(t), t, &mut out);
             f.on_tdoa(&tdoa(addr, t), t, &mut out);

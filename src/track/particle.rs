@@ -55,6 +55,10 @@ pub struct SparseConfig {
     /// Most filters running at once (each holds its particles: 80 kB at 2,000);
     /// aircraft beyond are refused and counted.
     pub max_filters: usize,
+    /// An aircraft gets a filter once its groups have been too small for a
+    /// fix this long (s): most aircraft entering coverage are fixed within
+    /// seconds, and a filter costs about a millisecond to start.
+    pub start_after_s: f64,
 }
 
 impl Default for SparseConfig {
@@ -68,6 +72,7 @@ impl Default for SparseConfig {
             max_range_m: 400_000.0,
             publish_sigma_m: 3_000.0,
             max_filters: 500,
+            start_after_s: 10.0,
         }
     }
 }
@@ -88,6 +93,7 @@ impl SparseConfig {
             ("accel_ms2", self.accel_ms2),
             ("max_range_m", self.max_range_m),
             ("publish_sigma_m", self.publish_sigma_m),
+            ("start_after_s", self.start_after_s),
         ] {
             if !(v.is_finite() && v > 0.0) {
                 errs.push(format!("{k} = {v} must be positive"));
