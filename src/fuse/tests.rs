@@ -341,6 +341,7 @@ fn tdoa(addr: u32, t: f64) -> crate::mlat::engine::TdoaGroup {
 #[test]
 fn particle_filters_are_bounded_and_give_way_to_a_fix() {
     let mut tcfg = TrackConfig::default();
+    tcfg.sparse.enabled = true;
     tcfg.sparse.max_filters = 1;
     // A filter starts once an aircraft's groups have been too small for a fix for 1 s.
     tcfg.sparse.start_after_s = 1.0;

@@ -37,7 +37,8 @@ use crate::mlat::solver::C_AIR;
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(default, deny_unknown_fields)]
 pub struct SparseConfig {
-    /// Track aircraft heard by too few receivers for a fix with particles.
+    /// Track aircraft heard by too few receivers for a fix with particles
+    /// (off by default).
     pub enabled: bool,
     pub particles: usize,
     /// Resample when the effective sample size falls below this share of the particles.
@@ -64,7 +65,9 @@ pub struct SparseConfig {
 impl Default for SparseConfig {
     fn default() -> Self {
         SparseConfig {
-            enabled: true,
+            // Off until the time differences' noise is right on counter-timed
+            // networks (docs/tracking.md).
+            enabled: false,
             particles: 2000,
             resample_below: 0.5,
             accel_ms2: 1.0,
