@@ -13,11 +13,9 @@
 use nalgebra::{Matrix2, Vector2};
 
 use crate::geo::KT_TO_MS;
-use crate::modes::commb::Bds50;
+use crate::modes::commb::{Bds50, REFRESH_S};
 use crate::track::measurement::{Measurement, Observation, Source};
 
-/// The longest a register's values wait for their refresh (s).
-const REFRESH_S: f64 = 1.3;
 /// Turn rate assumed when the register does not report one: a standard-rate turn.
 const UNKNOWN_TURN_DPS: f64 = 3.0;
 /// Along-track acceleration of an airliner changing speed (m/s^2, 1 sigma).

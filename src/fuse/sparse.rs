@@ -57,11 +57,11 @@ impl Fuser {
             }
         };
         let period = self.tcfg.period_default_s;
-        if g.t < a.sparse_due || s.position_sigma_m() > cfg.publish_sigma_m || !s.unimodal() {
+        if g.t < a.sparse_due {
             return;
         }
+        let Some((plane, gauss)) = s.publishable(cfg.publish_sigma_m) else { return };
         a.sparse_due = g.t + period;
-        let (plane, gauss) = s.gaussian();
         stats.published += 1;
         out.push(Output::Track(Box::new(TrackReport {
             id: a.id,

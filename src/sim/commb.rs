@@ -8,15 +8,9 @@
 //! beyond that and the register's age (the caller's).
 
 use super::trajectory::{Sample, Trajectory};
-use crate::geo::FT_TO_M;
+use crate::geo::{FT_TO_M, KT_TO_MS};
 use crate::modes::commb::registers::{Bds40, Bds50, Bds60};
 use crate::modes::commb::{air, encode, Bds};
-
-/// The longest a register's values may wait for their refresh (ICAO Doc 9871).
-pub const REFRESH_S: f64 = 1.3;
-
-const G: f64 = 9.80665;
-const MS_TO_KT: f64 = 3600.0 / 1852.0;
 
 fn track_deg(s: &Sample) -> f64 {
     s.vel[0].atan2(s.vel[1]).to_degrees().rem_euclid(360.0)
@@ -35,8 +29,9 @@ pub fn register(bds: Bds, traj: &Trajectory, t: f64, baro_offset_m: f64) -> Opti
             let (a, b) = (traj.at(t - 0.5).unwrap_or(s), traj.at(t + 0.5).unwrap_or(s));
             let rate_dps = ((track_deg(&b) - track_deg(&a) + 540.0).rem_euclid(360.0) - 180.0)
                 * if gs_ms > 1.0 { 1.0 } else { 0.0 };
-            let roll_deg = (gs_ms * rate_dps.to_radians() / G).atan().to_degrees();
-            let kt = ((gs_ms * MS_TO_KT / 2.0).round() * 2.0) as u32;
+            // Still air: true airspeed is ground speed.
+            let roll_deg = air::bank_deg(rate_dps, gs_ms);
+            let kt = ((gs_ms / KT_TO_MS / 2.0).round() * 2.0) as u32;
             encode::bds50(&Bds50 {
                 roll_deg: Some(roll_deg),
                 track_deg: Some(track_deg(&s)),

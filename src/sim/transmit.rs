@@ -229,7 +229,7 @@ impl Transmitter {
         }
         // A transponder answers from its register, which the avionics refresh
         // every 1.3 s at the most (ICAO Doc 9871): the values are up to that old.
-        let lag_s = self.rng.gen_range(0.0..super::commb::REFRESH_S);
+        let lag_s = self.rng.gen_range(0.0..crate::modes::commb::REFRESH_S);
         let filled = super::commb::register(bds, traj, t - lag_s, self.baro_offset_m);
         // Just after the aircraft appeared, its state now.
         filled.or_else(|| super::commb::register(bds, traj, t, self.baro_offset_m)).unwrap_or(0)

@@ -387,6 +387,10 @@ impl SparseTrack {
     /// for their width; a Gaussian's are 2.65 of them apart).
     pub fn unimodal(&self) -> bool {
         let (mean, cov) = self.moments();
+        self.one_mode(&mean, &cov)
+    }
+
+    fn one_mode(&self, mean: &Vector4<f64>, cov: &Matrix4<f64>) -> bool {
         let pos = cov.fixed_view::<2, 2>(0, 0).into_owned();
         let eig = pos.symmetric_eigen();
         let k = if eig.eigenvalues[0] > eig.eigenvalues[1] { 0 } else { 1 };
@@ -415,15 +419,25 @@ impl SparseTrack {
     /// in its plane (no acceleration), for publication.
     pub fn gaussian(&self) -> (Plane, Gaussian) {
         let (m, cov) = self.moments();
-        let mut g = Gaussian { x: Vector6::new(m[0], m[1], m[2], m[3], 0.0, 0.0), p: Matrix6::zeros() };
-        g.p.fixed_view_mut::<4, 4>(0, 0).copy_from(&cov);
-        (self.plane, g)
+        (self.plane, as_gaussian(&m, &cov))
     }
 
-    pub fn position_sigma_m(&self) -> f64 {
-        let (_, cov) = self.moments();
-        cov.fixed_view::<2, 2>(0, 0).into_owned().symmetric_eigen().eigenvalues.max().max(0.0).sqrt()
+    /// [`Self::gaussian`], when the cloud is worth publishing: one-peaked,
+    /// its position within `max_sigma_m` (1 sigma, largest axis). One pass
+    /// over the particles for all three.
+    pub fn publishable(&self, max_sigma_m: f64) -> Option<(Plane, Gaussian)> {
+        let (m, cov) = self.moments();
+        let sigma =
+            cov.fixed_view::<2, 2>(0, 0).into_owned().symmetric_eigen().eigenvalues.max().max(0.0).sqrt();
+        (sigma <= max_sigma_m && self.one_mode(&m, &cov)).then(|| (self.plane, as_gaussian(&m, &cov)))
     }
+}
+
+/// Mean and covariance of [e, n, ve, vn] as the trackers' six-state Gaussian.
+fn as_gaussian(m: &Vector4<f64>, cov: &Matrix4<f64>) -> Gaussian {
+    let mut g = Gaussian { x: Vector6::new(m[0], m[1], m[2], m[3], 0.0, 0.0), p: Matrix6::zeros() };
+    g.p.fixed_view_mut::<4, 4>(0, 0).copy_from(cov);
+    g
 }
 
 /// A plane point moved by Gauss-Newton steps to where the residuals are

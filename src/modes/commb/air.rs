@@ -4,6 +4,8 @@
 //! and speed report's IAS and Mach can be checked against the reply's
 //! altitude without knowing the temperature or the wind.
 
+use crate::geo::{FT_TO_M, KT_TO_MS};
+
 const P0_PA: f64 = 101_325.0;
 const T0_K: f64 = 288.15;
 /// Speed of sound at sea level, ISA (m/s).
@@ -14,8 +16,20 @@ const P11_PA: f64 = 22_632.06;
 /// g / (R lapse) and R T11 / g for dry air.
 const EXPONENT: f64 = 5.255_88;
 const SCALE_HEIGHT_11_M: f64 = 6_341.62;
-const FT: f64 = 0.3048;
-const KT: f64 = 1852.0 / 3600.0;
+const FT: f64 = FT_TO_M;
+const KT: f64 = KT_TO_MS;
+/// Standard gravity (m/s^2).
+pub const G_MS2: f64 = 9.80665;
+
+/// Turn rate (deg/s) of a coordinated turn at `roll_deg` of bank and `tas_ms`.
+pub fn turn_rate_dps(roll_deg: f64, tas_ms: f64) -> f64 {
+    (G_MS2 * roll_deg.to_radians().tan() / tas_ms).to_degrees()
+}
+
+/// Bank (deg) of a coordinated turn at `rate_dps` and `tas_ms`.
+pub fn bank_deg(rate_dps: f64, tas_ms: f64) -> f64 {
+    (tas_ms * rate_dps.to_radians() / G_MS2).atan().to_degrees()
+}
 
 /// Static pressure (Pa) at a pressure altitude (ft).
 pub fn pressure_pa(alt_ft: f64) -> f64 {
@@ -95,5 +109,10 @@ mod tests {
         assert!((cas_of_mach(mach_of_cas(250.0, 12_000.0), 12_000.0) - 250.0).abs() < 1e-6);
         // Mach 0.8 at FL350 (-54.3 deg C) is 461 kt true.
         assert!((0.8 * speed_of_sound_ms(35_000.0) / KT - 461.0).abs() < 1.0);
+        // A rate-one turn (3 deg/s) at 250 kt: tan(bank) = 128.6 m/s x 0.0524 rad/s / g,
+        // 34.5 degrees; and back.
+        let bank = bank_deg(3.0, 250.0 * KT);
+        assert!((bank - 34.48).abs() < 0.01, "{bank}");
+        assert!((turn_rate_dps(bank, 250.0 * KT) - 3.0).abs() < 1e-9);
     }
 }

@@ -16,6 +16,7 @@
 use super::air;
 use super::registers::{Bds40, Bds45, Bds50, Bds60};
 use super::{Known, Register};
+use crate::geo::KT_TO_MS;
 
 /// The verdict on one candidate.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -138,7 +139,7 @@ fn track_turn(r: &Bds50, known: &Known, a: &mut Assessment) {
     }
     if let (Some(roll), Some(rate), Some(tas)) = (r.roll_deg, r.track_rate_dps, r.tas_kt) {
         if tas > 0 {
-            let expected = (9.80665 * roll.to_radians().tan() / (tas as f64 * 1852.0 / 3600.0)).to_degrees();
+            let expected = air::turn_rate_dps(roll, tas as f64 * KT_TO_MS);
             if (rate - expected).abs() <= TURN_AGREES_DPS {
                 // Level wings and no turn is what zeros give too: worth less.
                 a.add(if roll.abs() >= 1.0 || rate != 0.0 { 3 } else { 1 });

@@ -25,6 +25,11 @@ pub use json::CommbFields;
 pub use memory::{CommbStats, Memory};
 pub use registers::{Bds40, Bds44, Bds45, Bds50, Bds60, GICB_REGISTERS};
 
+/// The longest a transponder's register waits for the avionics to refresh
+/// it (s, ICAO Doc 9871, for the registers read for surveillance): a reply's
+/// values are up to that old.
+pub const REFRESH_S: f64 = 1.3;
+
 /// A Comm-B register, by its BDS code.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum Bds {
@@ -132,14 +137,6 @@ impl Candidates {
     /// In BDS order.
     pub fn iter(self) -> impl Iterator<Item = Bds> {
         Self::ALL.into_iter().filter(move |&b| self.contains(b))
-    }
-
-    pub fn len(self) -> usize {
-        self.0.count_ones() as usize
-    }
-
-    pub fn is_empty(self) -> bool {
-        self.0 == 0
     }
 }
 
