@@ -25,6 +25,9 @@ pub struct Config {
     pub input: Vec<InputConfig>,
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub output: Vec<OutputConfig>,
+    /// Several processes over NATS JetStream (docs/cluster.md); absent, one node.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cluster: Option<crate::cluster::ClusterConfig>,
 }
 
 /// Reads a TOML file into `T`; errors name the file (and, from the parser,
@@ -58,6 +61,9 @@ impl Config {
         }
         errs.extend(crate::live::config::validate(&self.service, &self.receiver, &self.input, &self.output));
         errs.extend(self.http.validate());
+        if let Some(c) = &self.cluster {
+            errs.extend(c.validate().into_iter().map(|e| format!("[cluster] {e}")));
+        }
         if errs.is_empty() {
             Ok(self)
         } else {

@@ -6,6 +6,7 @@
 //! never read from the system clock, so every stage can be driven by recorded
 //! data and tested against truth.
 
+pub mod cluster;
 pub mod cmd;
 pub mod config;
 pub mod core;

@@ -74,6 +74,10 @@ impl Back {
         &self.fuser
     }
 
+    pub fn fuser_mut(&mut self) -> &mut Fuser {
+        &mut self.fuser
+    }
+
     /// The id of receiver `rx`, for the records that name it.
     pub fn receiver_id(&self, rx: usize) -> &str {
         self.receiver_ids.get(rx).map_or("?", String::as_str)

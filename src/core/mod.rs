@@ -259,6 +259,14 @@ impl Core {
         self.back.fuser()
     }
 
+    pub fn fuser_mut(&mut self) -> &mut Fuser {
+        self.back.fuser_mut()
+    }
+
+    pub fn mlat_mut(&mut self) -> &mut Mlat {
+        self.front.mlat_mut()
+    }
+
     /// Whether the conformance monitor distrusts an aircraft's ADS-B.
     pub fn is_suspect(&self, addr: u32) -> bool {
         self.front.is_suspect(addr)

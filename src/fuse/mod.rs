@@ -29,6 +29,7 @@ pub mod conflict;
 pub mod conformance;
 mod hold;
 pub mod methods;
+pub mod monitor;
 mod records;
 mod sparse;
 #[cfg(test)]
@@ -50,14 +51,11 @@ pub use conflict::ConflictConfig;
 pub use conformance::ConformanceConfig;
 use hold::{Waiting, MAX_WAITING};
 pub use methods::{Cross, Method};
+pub use monitor::ConflictMonitor;
 pub use records::{Alert, FuseStats, Output, Sources, SparseStats, TrackReport};
 
-/// An active conflict's alert stays up to this many times the predicted miss
-/// distance that raises it.
-const HOLD_MISS_FACTOR: f64 = 1.25;
-
 /// Slower tracks (taxiing, parked) are left out of conflict prediction (m/s).
-const MIN_CONFLICT_SPEED_MPS: f64 = 30.0;
+pub const MIN_CONFLICT_SPEED_MPS: f64 = 30.0;
 
 /// Speed no aircraft reaches (m/s).
 pub const MAX_SPEED_MPS: f64 = 1_200.0;
@@ -125,10 +123,13 @@ pub struct Fuser {
     /// (release time, addr) of each waiting measurement, in release order.
     held: VecDeque<(f64, u32)>,
     next_id: u64,
+    /// Track numbers advance by this much (a cluster's partitions number
+    /// theirs apart: `first + k * step`).
+    id_step: u64,
+    /// Numbers a taken-over aircraft keeps (a cluster's checkpoint).
+    reserved_ids: FastMap<u32, u64>,
     next_sweep: f64,
-    next_conflict: f64,
-    /// Active conflicts: the latest assessment and when the pair last met the test.
-    conflicts: FastMap<(u32, u32), (conflict::Conflict, f64)>,
+    monitor: ConflictMonitor,
     pub publish_source_tracks: bool,
     /// Single-source tracks are kept (track-to-track fusion, or published).
     singles: bool,
@@ -150,14 +151,38 @@ impl Fuser {
             aircraft: FastMap::default(),
             held: VecDeque::new(),
             next_id: 1,
+            id_step: 1,
+            reserved_ids: FastMap::default(),
             next_sweep: f64::NEG_INFINITY,
-            next_conflict: f64::NEG_INFINITY,
-            conflicts: FastMap::default(),
+            monitor: ConflictMonitor::new(),
             singles,
             publish_source_tracks,
             sparse_active: 0,
             stats: FuseStats::default(),
         }
+    }
+
+    /// Track numbers `first`, `first + step`, ... (a cluster's partition
+    /// `p` of `n` takes `p + 1` and `n`, so no two partitions share one).
+    pub fn number_tracks(&mut self, first: u64, step: u64) {
+        self.next_id = first.max(1);
+        self.id_step = step.max(1);
+    }
+
+    /// Each aircraft's track number, for a checkpoint; and the next number
+    /// this fuser would give.
+    pub fn track_numbers(&self) -> (Vec<(u32, u64)>, u64) {
+        let mut ids: Vec<(u32, u64)> = self.aircraft.iter().map(|(&addr, a)| (addr, a.id)).collect();
+        ids.extend(self.reserved_ids.iter().map(|(&a, &i)| (a, i)));
+        ids.sort_unstable();
+        (ids, self.next_id)
+    }
+
+    /// Takes a checkpoint's numbers: these aircraft keep theirs when their
+    /// tracks start here, and new ones continue after `next`.
+    pub fn keep_track_numbers(&mut self, ids: &[(u32, u64)], next: u64) {
+        self.reserved_ids.extend(ids.iter().copied());
+        self.next_id = self.next_id.max(next);
     }
 
     pub fn stats(&self) -> &FuseStats {
@@ -255,6 +280,10 @@ impl Fuser {
                 self.stats.table_full += 1;
                 return;
             }
+            let id = self.reserved_ids.remove(&addr).unwrap_or_else(|| {
+                self.next_id += self.id_step;
+                self.next_id - self.id_step
+            });
             let track = Track::new(self.tcfg.clone(), self.spec_mlat_only.clone());
             let mut single = track.clone();
             single.keep_gain = self.cfg.method == Method::Information;
@@ -262,7 +291,7 @@ impl Fuser {
             self.aircraft.insert(
                 addr,
                 Box::new(Aircraft {
-                    id: self.next_id,
+                    id,
                     fused: track.clone(),
                     single: [single.clone(), single],
                     last_source_t: [f64::NEG_INFINITY; 2],
@@ -291,7 +320,6 @@ impl Fuser {
                     cross: Cross::new(),
                 }),
             );
-            self.next_id += 1;
         }
         let a = self.aircraft.get_mut(&addr).expect("inserted");
         a.last_heard = now;
@@ -542,58 +570,19 @@ impl Fuser {
     /// Pairs of confirmed tracks in predicted conflict; alerts on changes.
     fn conflicts(&mut self, now: f64, out: &mut Vec<Output>) {
         let kin = self.conflict_kinematics(now);
-        // An active pair keeps its alert up to a predicted miss a quarter
-        // larger than the one that raises it, and until it has failed the
-        // test for `clear_after_s`: pairs passing about the limit apart
-        // raised and cleared alerts every few seconds.
-        let cfg = &self.cfg.conflict;
-        let raise_m = cfg.max_miss_nm * conflict::NM;
-        let relaxed =
-            conflict::ConflictConfig { max_miss_nm: cfg.max_miss_nm * HOLD_MISS_FACTOR, ..cfg.clone() };
-        let mut found: FastMap<(u32, u32), (conflict::Conflict, f64)> = conflict::find(&relaxed, &kin)
-            .into_iter()
-            .map(|c| ((c.a.min(c.b), c.a.max(c.b)), (c, now)))
-            .filter(|(k, (c, _))| c.miss_m < raise_m || self.conflicts.contains_key(k))
-            .collect();
-        let hold = cfg.clear_after_s;
-        for (k, &(c, met)) in &self.conflicts {
-            if !found.contains_key(k) && now - met < hold {
-                found.insert(*k, (c, met));
-            }
-        }
+        let mut alerts = Vec::new();
+        let aircraft = &self.aircraft;
+        let id = |addr: u32| aircraft.get(&addr).map_or(0, |a| a.id);
+        self.stats.conflicts += self.monitor.assess(&self.cfg.conflict, now, &kin, id, &mut alerts);
         for a in self.aircraft.values_mut() {
             a.in_conflict = false;
         }
-        for &(x, y) in found.keys() {
-            for addr in [x, y] {
-                if let Some(a) = self.aircraft.get_mut(&addr) {
-                    a.in_conflict = true;
-                }
+        for addr in self.monitor.involved() {
+            if let Some(a) = self.aircraft.get_mut(&addr) {
+                a.in_conflict = true;
             }
         }
-        let id = |aircraft: &FastMap<u32, Box<Aircraft>>, addr: u32| aircraft.get(&addr).map_or(0, |a| a.id);
-        let mut changes: Vec<(bool, conflict::Conflict)> = found
-            .iter()
-            .filter(|(k, _)| !self.conflicts.contains_key(k))
-            .map(|(_, (c, _))| (true, *c))
-            .chain(
-                self.conflicts.iter().filter(|(k, _)| !found.contains_key(k)).map(|(_, (c, _))| (false, *c)),
-            )
-            .collect();
-        changes.sort_by_key(|(active, c)| (!active, c.a.min(c.b), c.a.max(c.b)));
-        for (active, c) in changes {
-            self.stats.conflicts += active as u64;
-            out.push(Output::Alert(Alert::Conflict {
-                t: now,
-                pair: [(c.a, id(&self.aircraft, c.a)), (c.b, id(&self.aircraft, c.b))],
-                active,
-                tau_s: c.tau_s,
-                t_cpa_s: c.t_cpa_s,
-                miss_m: c.miss_m,
-                dz_m: c.dz_m,
-            }));
-        }
-        self.conflicts = found;
+        out.extend(alerts.into_iter().map(Output::Alert));
     }
 
     /// What conflict prediction looks at: each airborne confirmed track's
@@ -652,8 +641,7 @@ impl Fuser {
             self.held.pop_front();
             self.release(addr, now, out);
         }
-        if self.cfg.conflict.enabled && now >= self.next_conflict {
-            self.next_conflict = now + self.cfg.conflict.interval_s;
+        if self.monitor.due(&self.cfg.conflict, now) {
             self.conflicts(now, out);
         }
         if now >= self.next_sweep {

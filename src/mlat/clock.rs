@@ -53,7 +53,7 @@ pub enum Update {
     Restarted,
 }
 
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct PairFilter {
     x: Vector2<f64>,
     p: Matrix2<f64>,
@@ -106,6 +106,14 @@ impl PairFilter {
             params.q_drift * a,
         );
         (f * self.x, f * self.p * f.transpose() + q)
+    }
+
+    /// The normalised innovation squared a measurement would have, the
+    /// filter left as it is (a cluster worker judging an emitter against
+    /// the clock service's filters).
+    pub fn nis(&self, z: f64, r: f64, tau: f64, params: &PairParams) -> f64 {
+        let (x, p) = self.predicted(tau, params);
+        (z - x[0]).powi(2) / (p[(0, 0)] + r)
     }
 
     /// Feeds one measurement `z` (s) with variance `r` (s^2) taken at local time `tau`.

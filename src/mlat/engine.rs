@@ -15,11 +15,12 @@
 //! receivers' table (`receivers.rs`) and the tests (`tests.rs`).
 
 use super::survey::{enu_basis, Survey};
-use super::timing::{KnownTiming, TimingModel, Verdict};
+use super::timing::{learn_residuals, KnownTiming, Residual, TimingModel, TimingModels, Verdict};
 use crate::FastMap;
 
 use super::clock::PairParams;
 use super::group::{Group, GroupInfo};
+use super::shared::{shared_epoch, SyncNote, SyncSnapshot};
 use super::solver::{solve, AltitudeConstraint, AtFix, Measurement, Reject, SolverLimits, C_AIR};
 use super::sync::{ClockSync, GroupVec, LocalCopy};
 use crate::feed::capture::{ClockKind, ReceiverDecl};
@@ -162,6 +163,12 @@ const SURVEY_CHECK_EVERY: u64 = 200;
 /// Mean normalised innovation beyond which an aircraft is no longer a sync
 /// source (honest ones average about 1).
 const SYNC_SOURCE_MAX_NIS: f64 = 6.0;
+impl TimingModels for Vec<Rx> {
+    fn model(&mut self, rx: usize) -> &mut TimingModel {
+        &mut self[rx].timing
+    }
+}
+
 impl Rx {
     /// Timing sigma (s) to weight this receiver with: its learnt core
     /// (which starts from the configured jitter), never better than a third
@@ -217,6 +224,30 @@ pub struct Mlat {
     /// the fixes' geometry sees it, for aircraft without a better one.
     geometric_baro: GeometricBaros,
     pub stats: MlatStats,
+    /// In a cluster: what this engine did to the clocks, for the clock
+    /// service to do once (`None` on a single node, which syncs itself).
+    shared: Option<Vec<SyncNote>>,
+}
+
+/// A receiver's timing model before anything is learnt: its clock kind's configured jitter.
+pub fn timing_prior(cfg: &MlatConfig, clock: ClockKind) -> TimingModel {
+    TimingModel::prior(jitter_ns(cfg, clock) * 1e-9)
+}
+
+fn jitter_ns(cfg: &MlatConfig, clock: ClockKind) -> f64 {
+    match clock {
+        ClockKind::Beast12 => cfg.jitter_beast12_ns,
+        ClockKind::Gps => cfg.jitter_gps_ns,
+    }
+}
+
+/// The clock pairs' parameters a configuration gives (also the cluster's clock service's).
+pub fn pair_params(cfg: &MlatConfig) -> PairParams {
+    PairParams {
+        q_phase: (cfg.clock_phase_noise_ns * 1e-9).powi(2),
+        q_drift: (cfg.clock_drift_walk_ppb * 1e-9).powi(2),
+        ..PairParams::default()
+    }
 }
 
 impl Mlat {
@@ -262,11 +293,7 @@ impl Mlat {
     }
 
     pub fn new(cfg: MlatConfig) -> Self {
-        let pair = PairParams {
-            q_phase: (cfg.clock_phase_noise_ns * 1e-9).powi(2),
-            q_drift: (cfg.clock_drift_walk_ppb * 1e-9).powi(2),
-            ..PairParams::default()
-        };
+        let pair = pair_params(&cfg);
         Mlat {
             cfg,
             limits: SolverLimits::default(),
@@ -276,14 +303,56 @@ impl Mlat {
             gps_epoch_ns: None,
             geometric_baro: GeometricBaros::default(),
             stats: MlatStats::default(),
+            shared: None,
+        }
+    }
+
+    /// Clock synchronisation done elsewhere, once for a cluster
+    /// ([`super::shared`]): this engine notes its sync transmissions and
+    /// clock resets instead of applying them, and uses the snapshots given
+    /// to [`load_sync`](Self::load_sync).
+    pub fn share_sync(&mut self) {
+        self.shared = Some(Vec::new());
+    }
+
+    /// The notes made since the last call (empty on a single node).
+    pub fn take_sync_notes(&mut self) -> Vec<SyncNote> {
+        self.shared.as_mut().map(std::mem::take).unwrap_or_default()
+    }
+
+    /// The clock service's state, in place of this engine's own: the clock
+    /// pairs, and the receivers' timing models (but those the configuration
+    /// gives).
+    pub fn load_sync(&mut self, snapshot: &SyncSnapshot) {
+        self.sync.load_snapshot(snapshot);
+        for (rx, model) in snapshot.timing.iter().enumerate().take(self.rxs.len()) {
+            if !self.rxs[rx].timing_known {
+                self.rxs[rx].timing = *model;
+                self.sync.set_gps_bias(rx, self.rxs[rx].bias());
+            }
+        }
+    }
+
+    fn note_sync(&mut self, note: SyncNote) {
+        if let Some(notes) = &mut self.shared {
+            notes.push(note);
+        }
+    }
+
+    /// In a cluster, a fix's lessons for the receivers' timing go to the
+    /// clock service (true); on one node they are learnt here (false).
+    fn note_timing(&mut self, now: f64, res: &[Residual]) -> bool {
+        match &mut self.shared {
+            Some(notes) => {
+                notes.push(SyncNote::Timing { now, residuals: res.to_vec() });
+                true
+            }
+            None => false,
         }
     }
 
     pub fn add_receiver(&mut self, d: &ReceiverDecl) {
-        let jitter = match d.clock {
-            ClockKind::Beast12 => self.cfg.jitter_beast12_ns,
-            ClockKind::Gps => self.cfg.jitter_gps_ns,
-        };
+        let jitter = jitter_ns(&self.cfg, d.clock);
         self.rxs.push(Rx {
             id: d.id.clone(),
             ecef: geodetic_to_ecef(d.lat, d.lon, d.alt),
@@ -367,8 +436,8 @@ impl Mlat {
             .collect();
         format!(
             "mlat: {} fixes from {} groups; pairs {valid}/{total} valid; sync residual ns [{}]; rejects [{}]; \
-             excluded [{}]; misplaced [{}]; sync messages {}, outliers {}, restarts {}; GPS time jumps {}; \
-             self-synchronised fixes {}",
+             excluded [{}]; misplaced [{}]; sync messages {}, pair updates {}, outliers {}, restarts {}; \
+             GPS time jumps {}; self-synchronised fixes {}",
             self.stats.fixes,
             self.stats.groups,
             residuals.join(" "),
@@ -376,6 +445,7 @@ impl Mlat {
             excluded.join(" "),
             misplaced.join("; "),
             self.stats.sync_messages,
+            self.sync.stats.updates,
             self.sync.stats.outliers,
             self.sync.stats.restarts,
             self.stats.time_jumps,
@@ -409,15 +479,20 @@ impl Mlat {
                 (ns - epoch) as f64 * 1e-9
             }
             ClockKind::Beast12 => {
-                let epoch = *self.rxs[rx].beast_epoch.get_or_insert(ts);
+                let shared = self.shared.is_some();
+                let epoch_of = |ts: u64| if shared { shared_epoch(ts) } else { ts };
+                let epoch = *self.rxs[rx].beast_epoch.get_or_insert(epoch_of(ts));
                 let local = (ts as i64 - epoch as i64) as f64 / 12e6;
                 // A counter that moved seconds more or less than the server's
                 // clock restarted (or jumped): new epoch, its pairs start again.
                 if let Some((l0, a0)) = self.rxs[rx].last_seen {
                     if ((local - l0) - (arrival - a0)).abs() > CLOCK_JUMP_S {
                         self.sync.reset_receiver(rx);
-                        self.rxs[rx].beast_epoch = Some(ts);
-                        self.rxs[rx].last_seen = Some((0.0, arrival));
+                        self.note_sync(SyncNote::ResetReceiver { now: arrival, rx: rx as u32 });
+                        let epoch = epoch_of(ts);
+                        let local = (ts - epoch) as f64 / 12e6;
+                        self.rxs[rx].beast_epoch = Some(epoch);
+                        self.rxs[rx].last_seen = Some((local, arrival));
                         // A receiver whose clock jumps all the time must not
                         // flood the log: its first jumps, then each power of
                         // two (all of them in the metric).
@@ -425,7 +500,7 @@ impl Mlat {
                         if n.is_power_of_two() {
                             tracing::info!(receiver = %self.rxs[rx].id, jumps = n, "clock jump: receiver restarted");
                         }
-                        return 0.0;
+                        return local;
                     }
                 }
                 self.rxs[rx].last_seen = Some((local, arrival));
@@ -487,10 +562,10 @@ impl Mlat {
         let (times, root) = self.sync.common_time(&copies, now);
         if let (Some(a), false) = (info.adsb_ecef, info.suspect) {
             match &all_copies {
-                None => self.survey_from(&copies, &times, a, info.adsb_sigma_m),
+                None => self.survey_from(&copies, &times, a, info.adsb_sigma_m, now),
                 Some(all) => {
                     let (all_times, _) = self.sync.common_time(all, now);
-                    self.survey_from(all, &all_times, a, info.adsb_sigma_m)
+                    self.survey_from(all, &all_times, a, info.adsb_sigma_m, now)
                 }
             }
         }
@@ -534,7 +609,7 @@ impl Mlat {
             return GroupOutcome::NoFix(NoFix::UnverifiedAddress);
         }
         if let Some(j) = judged.as_ref().filter(|_| self.cfg.calibrate && fix.dof >= 1) {
-            self.learn(j, &fix, &sites, &sync_vars, &dropped);
+            self.learn(j, &fix, &sites, &sync_vars, &dropped, now);
         }
         self.remember_fix(info.addr, &fix, judged.as_ref().map(|j| &j.at), (alt, baro), now);
         self.stats.fixes += 1;
@@ -678,8 +753,7 @@ impl Mlat {
             if self.aircraft.get(&info.addr).is_some_and(|a| a.sync_banned) {
                 self.stats.sync_refused += 1;
             } else {
-                let (nis_sum, judged) = self.sync_from(copies, p, info.adsb_sigma_m, now);
-                self.sync.note_reference(copies, info.addr);
+                let (nis_sum, judged) = self.sync_from(copies, p, info.addr, info.adsb_sigma_m, now);
                 self.judge_sync_source(info.addr, nis_sum, judged);
             }
         }
@@ -900,7 +974,14 @@ impl Mlat {
         self.aircraft.get(&addr).is_some_and(|a| a.sync_banned)
     }
 
-    fn sync_from(&mut self, copies: &[LocalCopy], p: [f64; 3], sigma_pos: f64, now: f64) -> (f64, u32) {
+    fn sync_from(
+        &mut self,
+        copies: &[LocalCopy],
+        p: [f64; 3],
+        addr: u32,
+        sigma_pos: f64,
+        now: f64,
+    ) -> (f64, u32) {
         self.stats.sync_messages += 1;
         let n = copies.len();
         // On the stack: a sync message's dozen heap lists cost as much as
@@ -925,7 +1006,24 @@ impl Mlat {
                 geom[a * n + b] = sigma_pos * sigma_pos * d2 / (C_AIR * C_AIR);
             }
         }
-        self.sync.observe(copies, &ranges, &var, &geom, now)
+        match &mut self.shared {
+            None => {
+                let judged = self.sync.observe(copies, &ranges, &var, &geom, now);
+                self.sync.note_reference(copies, addr);
+                judged
+            }
+            Some(notes) => {
+                notes.push(SyncNote::Observed {
+                    now,
+                    addr,
+                    copies: copies.iter().map(|c| (c.rx as u32, c.t)).collect(),
+                    ranges: ranges.to_vec(),
+                    var: var.to_vec(),
+                    geom: geom.to_vec(),
+                });
+                self.sync.judge(copies, &ranges, &var, &geom)
+            }
+        }
     }
 }
 

@@ -13,6 +13,7 @@ pub mod group;
 mod late;
 mod pending;
 pub mod report;
+pub mod shared;
 pub mod solver;
 pub mod state;
 pub mod survey;

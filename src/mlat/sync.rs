@@ -25,7 +25,7 @@ pub struct LocalCopy {
     pub t: f64,
 }
 
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RxHealth {
     pub sync_updates: u64,
     pub sync_outliers: u64,
@@ -39,7 +39,7 @@ pub struct RxHealth {
     pub clock_resets: u64,
 }
 
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct SyncStats {
     pub updates: u64,
     pub outliers: u64,
@@ -65,7 +65,17 @@ impl Hasher for PairHasher {
     }
 }
 
-type PairMap = HashMap<(usize, usize), PairFilter, BuildHasherDefault<PairHasher>>;
+/// One pair's measurement from a sync transmission: receivers `i < j`,
+/// the clock difference `z` (s) with its variance `r` (s^2), at `tau` on i's clock.
+struct PairMeasurement {
+    i: usize,
+    j: usize,
+    z: f64,
+    r: f64,
+    tau: f64,
+}
+
+pub(crate) type PairMap = HashMap<(usize, usize), PairFilter, BuildHasherDefault<PairHasher>>;
 
 /// The aircraft a counter-timed receiver's clock was lately synchronised on
 /// most, with their shares of its recent sync transmissions (exponential
@@ -73,7 +83,7 @@ type PairMap = HashMap<(usize, usize), PairFilter, BuildHasherDefault<PairHasher
 /// aircraft inherits the errors of its own ADS-B positions through the
 /// clocks: not independent of its ADS-B, as a fix synchronised on other
 /// aircraft is.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Reference {
     slots: [(u32, f64); 2],
     /// Sync transmissions noted, up to the memory: a plain mean over the
@@ -113,11 +123,11 @@ impl Reference {
 
 pub struct ClockSync {
     pub params: PairParams,
-    pairs: PairMap,
-    clocks: Vec<ClockKind>,
+    pub(crate) pairs: PairMap,
+    pub(crate) clocks: Vec<ClockKind>,
     /// Per receiver, the GPS-timed receivers it has a pair filter with, in
     /// index order: what `gps_peers` answers without asking every receiver.
-    gps_peers: Vec<Vec<usize>>,
+    pub(crate) gps_peers: Vec<Vec<usize>>,
     pub health: Vec<RxHealth>,
     /// The receivers' ids, for the log.
     ids: Vec<String>,
@@ -126,7 +136,7 @@ pub struct ClockSync {
     /// for counters): pair filters relate a counter to a GPS receiver's own
     /// clock, bias and all, so converting through one GPS receiver or
     /// another must take their biases' difference into account.
-    gps_bias: Vec<f64>,
+    pub(crate) gps_bias: Vec<f64>,
     pub stats: SyncStats,
 }
 
@@ -223,18 +233,12 @@ impl ClockSync {
         let mut tally: GroupVec<(u32, u32, usize)> = smallvec::smallvec![(0, 0, 0); copies.len()];
         for a in 0..copies.len() {
             for b in a + 1..copies.len() {
-                let (ca, cb) = (copies[a], copies[b]);
-                if self.clocks[ca.rx] == ClockKind::Gps && self.clocks[cb.rx] == ClockKind::Gps {
+                let Some(PairMeasurement { i, j, z, r, tau }) =
+                    self.pair_measurement(copies, ranges, var, geom_var, a, b)
+                else {
                     continue;
-                }
-                let (i, j, ti, tj, ri, rj) = if ca.rx < cb.rx {
-                    (ca.rx, cb.rx, ca.t, cb.t, ranges[a], ranges[b])
-                } else {
-                    (cb.rx, ca.rx, cb.t, ca.t, ranges[b], ranges[a])
                 };
-                let z = (tj - rj / C_AIR) - (ti - ri / C_AIR);
-                let r = var[a] + var[b] + geom_var[a * copies.len() + b];
-                let tau = ti - ri / C_AIR;
+                let (ca, _) = (copies[a], copies[b]);
                 let params = self.params;
                 // The filter's verdict read while it is at hand: a second
                 // lookup per pair was a fifth of this function.
@@ -303,6 +307,55 @@ impl ClockSync {
                 },
             };
             self.note_health(c.rx, share, now);
+        }
+        (nis_sum, judged)
+    }
+
+    /// The measurement copies `a` and `b` of a sync transmission make for
+    /// their pair (`None` for two GPS-timed receivers: no filter relates them).
+    #[inline]
+    fn pair_measurement(
+        &self,
+        copies: &[LocalCopy],
+        ranges: &[f64],
+        var: &[f64],
+        geom_var: &[f64],
+        a: usize,
+        b: usize,
+    ) -> Option<PairMeasurement> {
+        let (ca, cb) = (copies[a], copies[b]);
+        if self.clocks[ca.rx] == ClockKind::Gps && self.clocks[cb.rx] == ClockKind::Gps {
+            return None;
+        }
+        let (i, j, ti, tj, ri, rj) = if ca.rx < cb.rx {
+            (ca.rx, cb.rx, ca.t, cb.t, ranges[a], ranges[b])
+        } else {
+            (cb.rx, ca.rx, cb.t, ca.t, ranges[b], ranges[a])
+        };
+        let z = (tj - rj / C_AIR) - (ti - ri / C_AIR);
+        let r = var[a] + var[b] + geom_var[a * copies.len() + b];
+        Some(PairMeasurement { i, j, z, r, tau: ti - ri / C_AIR })
+    }
+
+    /// What [`observe`](Self::observe) returns, the filters left as they
+    /// are: a cluster worker judges an emitter against the clock service's
+    /// filters while that service applies the measurement.
+    pub fn judge(&self, copies: &[LocalCopy], ranges: &[f64], var: &[f64], geom_var: &[f64]) -> (f64, u32) {
+        let (mut nis_sum, mut judged) = (0.0, 0);
+        for a in 0..copies.len() {
+            for b in a + 1..copies.len() {
+                let Some(m) = self.pair_measurement(copies, ranges, var, geom_var, a, b) else {
+                    continue;
+                };
+                let Some(f) = self.pairs.get(&(m.i, m.j)) else {
+                    continue;
+                };
+                let converged = f.updates > self.params.min_updates * 2;
+                if converged && !self.health[m.i].excluded && !self.health[m.j].excluded {
+                    nis_sum += f.nis(m.z, m.r, m.tau, &self.params).min(100.0);
+                    judged += 1;
+                }
+            }
         }
         (nis_sum, judged)
     }

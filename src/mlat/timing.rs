@@ -37,7 +37,7 @@ const LATE_RATE_RANGE: (f64, f64) = (0.002, 0.5);
 pub const MIN_RESIDUALS: u64 = 20;
 
 /// What has been learnt about one receiver's timing.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TimingModel {
     /// Residuals contributing.
     pub n: u64,
@@ -105,7 +105,7 @@ impl KnownTiming {
 }
 
 /// How a residual sits under a receiver's model.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Verdict {
     /// Posterior probability that the copy is a late one.
     pub p_late: f64,
@@ -390,4 +390,73 @@ mod tests {
         assert!(m.verdict(-300e-9, var).outlier());
         assert!(!m.verdict(40e-9, var).outlier());
     }
+}
+
+/// One fix's lesson for one receiver's timing model.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub enum Residual {
+    /// A copy in the fix, with the verdict the fix was hedged with.
+    Judged { rx: u32, r: f64, h: f64, v: Verdict, used_offset_s: f64 },
+    /// A copy judged here against the model's variance and the sync's (`var`).
+    Against { rx: u32, r: f64, h: f64, var: f64, used_offset_s: f64 },
+}
+
+impl Residual {
+    pub fn rx(&self) -> usize {
+        match *self {
+            Residual::Judged { rx, .. } | Residual::Against { rx, .. } => rx as usize,
+        }
+    }
+
+    /// The residual against a model whose offset is now `offset_s`: the
+    /// fix removed `used_offset_s` from the copy's time. (A cluster's clock
+    /// service learns from fixes made with its models of a moment ago;
+    /// taken as they came, a burst of fixes made before a correction
+    /// arrived applied that correction once each, and the offsets swung.)
+    fn against(&self, offset_s: f64) -> f64 {
+        match *self {
+            // The difference first: exactly zero, and so the residual
+            // exactly as it was, when nothing moved in between (one node).
+            Residual::Judged { r, used_offset_s, .. } | Residual::Against { r, used_offset_s, .. } => {
+                r + (used_offset_s - offset_s)
+            }
+        }
+    }
+}
+
+/// Receivers' timing models by index: the engine's receivers, or the
+/// cluster clock service's plain list.
+pub trait TimingModels {
+    fn model(&mut self, rx: usize) -> &mut TimingModel;
+}
+
+impl TimingModels for Vec<TimingModel> {
+    fn model(&mut self, rx: usize) -> &mut TimingModel {
+        &mut self[rx]
+    }
+}
+
+/// Teaches one fix's residuals to the models, then takes
+/// their common step back: only differences of offsets are observed (a
+/// common offset is the emission time's), and left in, the common step
+/// would wander. Returns the receivers whose offsets moved.
+pub fn learn_residuals(res: &[Residual], models: &mut impl TimingModels) -> smallvec::SmallVec<[usize; 16]> {
+    let mut moved = smallvec::SmallVec::new();
+    let mut sum = 0.0;
+    for r in res {
+        let m = models.model(r.rx());
+        let d = r.against(m.offset());
+        sum += match *r {
+            Residual::Judged { h, v, .. } => m.learn_judged(d, h, v),
+            Residual::Against { h, var, .. } => m.learn(d, h, var),
+        };
+        moved.push(r.rx());
+    }
+    if !moved.is_empty() {
+        let common = sum / moved.len() as f64;
+        for &rx in &moved {
+            models.model(rx).shift(-common);
+        }
+    }
+    moved
 }

@@ -22,6 +22,7 @@ impl Mlat {
         times: &[Option<(f64, f64)>],
         a: [f64; 3],
         sigma_a: f64,
+        now: f64,
     ) {
         // (receiver, emission as its copy says and with its learnt offset
         // removed, weight, part of the reference)
@@ -72,7 +73,7 @@ impl Mlat {
             self.rxs[rx].survey.add(u_enu, C_AIR * (e - t_emit), var);
             if self.rxs[rx].survey.count() % SURVEY_CHECK_EVERY == 0 {
                 if self.cfg.self_survey {
-                    self.apply_survey(rx);
+                    self.apply_survey(rx, now);
                 } else {
                     self.judge_position(rx);
                 }
@@ -108,7 +109,7 @@ impl Mlat {
     /// Puts a misplaced receiver where the traffic says it is (or back where
     /// it was declared once the survey no longer says so). Its clock pairs
     /// start again: what they learnt rested on the old position.
-    fn apply_survey(&mut self, rx: usize) {
+    fn apply_survey(&mut self, rx: usize, now: f64) {
         let r = &self.rxs[rx];
         let target =
             r.survey.offset().filter(|o| o.misplaced()).map(|o| ([o.enu_m[0], o.enu_m[1]], o.sigma_m));
@@ -132,5 +133,6 @@ impl Mlat {
         };
         tracing::info!(receiver = %r.id, offset_en_m = ?r.surveyed, "self-survey: the receiver's position in use changed");
         self.sync.reset_pairs(rx);
+        self.note_sync(crate::mlat::shared::SyncNote::ResetPairs { now, rx: rx as u32 });
     }
 }

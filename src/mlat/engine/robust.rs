@@ -164,43 +164,45 @@ impl Mlat {
         sites: &[Site],
         sync_vars: &[f64],
         dropped: &Dropped,
+        now: f64,
     ) {
-        let (mut moved, mut sum): (GroupVec<usize>, f64) = (GroupVec::new(), 0.0);
+        let mut res: GroupVec<Residual> = GroupVec::new();
         for (k, (site, &var)) in sites.iter().zip(sync_vars).enumerate() {
             let (r, h) = judged.at.residual(k);
             // A merged site's residual is no single receiver's (nor verdict).
             let Some(v) = judged.verdicts[k] else { continue };
             let rx = site[0];
-            let rx_state = &mut self.rxs[rx];
+            let rx_state = &self.rxs[rx];
             if h >= 0.95 || rx_state.timing_known {
                 continue;
             }
             // The verdict the fix was hedged with, unless the fix weighted
             // the receiver at its floor rather than its learnt sigma.
-            sum += if rx_state.sigma() == rx_state.timing.sigma() {
-                rx_state.timing.learn_judged(r, h, v)
+            let used_offset_s = rx_state.timing.offset();
+            res.push(if rx_state.sigma() == rx_state.timing.sigma() {
+                Residual::Judged { rx: rx as u32, r, h, v, used_offset_s }
             } else {
-                rx_state.timing.learn(r, h, var)
-            };
-            moved.push(rx);
+                Residual::Against { rx: rx as u32, r, h, var, used_offset_s }
+            });
         }
         for (m, site, var) in dropped {
             if site.len() > 1 || self.rxs[site[0]].timing_known {
                 continue;
             }
             let r = m.t - fix.t_emit - ecef_distance(m.pos, fix.ecef) / C_AIR;
-            sum += self.rxs[site[0]].timing.learn(r, 0.0, *var);
-            moved.push(site[0]);
+            let used_offset_s = self.rxs[site[0]].timing.offset();
+            res.push(Residual::Against { rx: site[0] as u32, r, h: 0.0, var: *var, used_offset_s });
         }
-        // Only differences of offsets are observed: their common step is
-        // taken back, or it would wander (and the survey, which compares a
-        // receiver's raw time with the others' corrected ones, with it).
-        if !moved.is_empty() {
-            let common = sum / moved.len() as f64;
-            for &rx in &moved {
-                self.rxs[rx].timing.shift(-common);
-                self.sync.set_gps_bias(rx, self.rxs[rx].bias());
-            }
+        if res.is_empty() {
+            return;
+        }
+        // In a cluster the clock service learns, once for every worker.
+        if self.note_timing(now, &res) {
+            return;
+        }
+        let moved = learn_residuals(&res, &mut self.rxs);
+        for rx in moved {
+            self.sync.set_gps_bias(rx, self.rxs[rx].bias());
         }
     }
 }

@@ -1,0 +1,354 @@
+//! fuse1090 on several machines: NATS JetStream carries the work, each piece
+//! of it done once.
+//!
+//! ```text
+//!  receivers ─▶ ingest ──frames.<p>──▶ worker (partitions p..) ──events.<p>──▶ publisher ─▶ outputs
+//!                                        │  ▲                                    (conflicts across
+//!                                  sync.<p>  clock KV "snapshot"                  partitions)
+//!                                        ▼  │
+//!                                        clock (one ClockSync for the network)
+//! ```
+//!
+//! - **ingest** puts every frame on the subject of its aircraft's partition
+//!   (the address, recovered from the parity where it is not in clear, so
+//!   every receiver's copy of a transmission lands in the same partition),
+//!   in batches of `batch_s` of data time; every partition gets a batch each
+//!   period, empty or not, so each knows how far time has gone.
+//! - **worker** claims partitions (a KV key per partition, created only if
+//!   absent and refreshed with its revision: two workers cannot hold one),
+//!   and runs the same sans-IO [`Core`](crate::core::Core) per partition as
+//!   one node does, with clock synchronisation shared ([`crate::mlat::shared`]).
+//!   A batch is acknowledged once its events and sync notes are stored, so a
+//!   worker that dies loses nothing: the next owner takes the partition's
+//!   unacknowledged batches, and its republished events are dropped by
+//!   their message ids. Track numbers are checkpointed per partition.
+//! - **clock** applies every worker's sync notes in data-time order, up to
+//!   the time every partition has reached, and stores the result as a
+//!   snapshot that the workers load; a worker does not process a batch more
+//!   than `clock_lag_s` ahead of the snapshot.
+//! - **publisher** writes the events out and runs conflict prediction over
+//!   all partitions' tracks (the workers do not).
+//!
+//! The format of what travels is in [`wire`]; the subjects and buckets are
+//! named from `name` ([`Names`]). See docs/cluster.md.
+
+pub mod clock;
+pub mod ingest;
+pub mod publisher;
+pub mod wire;
+pub mod worker;
+
+use std::path::Path;
+use std::time::Duration;
+
+use anyhow::{bail, Context, Result};
+use async_nats::jetstream::{self, kv, stream};
+use serde::{Deserialize, Serialize};
+
+use crate::config::Config;
+
+/// What a process does in the cluster.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Role {
+    Ingest,
+    Worker,
+    Clock,
+    Publisher,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ClusterConfig {
+    /// The NATS server (JetStream enabled).
+    pub url: String,
+    /// Prefix of every stream, subject and bucket: two clusters on one NATS
+    /// server need two names.
+    pub name: String,
+    /// How many partitions the aircraft are spread over (fixed for a
+    /// cluster's life: more than workers, so that a lost worker's share
+    /// spreads over the others).
+    pub partitions: u32,
+    /// What this process does.
+    pub roles: Vec<Role>,
+    /// This worker's name (unique in the cluster); the host name and
+    /// process id when absent.
+    pub worker_id: Option<String>,
+    /// Data time per frame batch (s).
+    pub batch_s: f64,
+    /// How far a worker may run ahead of the clock snapshot (s; at least
+    /// two batches).
+    pub clock_lag_s: f64,
+    /// A partition whose worker has not renewed its claim for this long
+    /// (s) is taken over.
+    pub lease_s: f64,
+    /// How often a worker stores its partitions' track numbers (s of data time).
+    pub checkpoint_s: f64,
+    /// The frame stream's bound (bytes): the oldest frames go first.
+    pub max_stream_bytes: i64,
+}
+
+impl Default for ClusterConfig {
+    fn default() -> Self {
+        ClusterConfig {
+            url: "nats://127.0.0.1:4222".into(),
+            name: "fuse1090".into(),
+            partitions: 12,
+            roles: vec![Role::Ingest, Role::Worker, Role::Clock, Role::Publisher],
+            worker_id: None,
+            batch_s: 0.1,
+            clock_lag_s: 0.3,
+            lease_s: 3.0,
+            checkpoint_s: 5.0,
+            max_stream_bytes: 1 << 30,
+        }
+    }
+}
+
+impl ClusterConfig {
+    pub fn validate(&self) -> Vec<String> {
+        let mut errs = Vec::new();
+        if !(1..=4096).contains(&self.partitions) {
+            errs.push(format!("partitions = {} must be in 1..=4096", self.partitions));
+        }
+        if self.roles.is_empty() {
+            errs.push("roles must name at least one of ingest, worker, clock, publisher".into());
+        }
+        if !(self.batch_s > 0.0 && self.batch_s <= 1.0) {
+            errs.push(format!("batch_s = {} must be in (0, 1]", self.batch_s));
+        }
+        if !(self.clock_lag_s >= 2.0 * self.batch_s && self.clock_lag_s <= 10.0) {
+            errs.push(format!("clock_lag_s = {} must be in [2 batch_s, 10]", self.clock_lag_s));
+        }
+        if !(self.lease_s >= 1.0 && self.lease_s <= 60.0) {
+            errs.push(format!("lease_s = {} must be in [1, 60]", self.lease_s));
+        }
+        if !(self.checkpoint_s > 0.0 && self.checkpoint_s.is_finite()) {
+            errs.push(format!("checkpoint_s = {} must be positive", self.checkpoint_s));
+        }
+        if self.max_stream_bytes < 1 << 20 {
+            errs.push(format!("max_stream_bytes = {} must be at least 1 MiB", self.max_stream_bytes));
+        }
+        if !self.name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+            || self.name.is_empty()
+        {
+            errs.push(format!("name = {:?} may hold letters, digits, '-' and '_' only", self.name));
+        }
+        errs
+    }
+
+    pub fn has(&self, role: Role) -> bool {
+        self.roles.contains(&role)
+    }
+}
+
+/// The cluster's subjects, streams and buckets.
+#[derive(Clone, Debug)]
+pub struct Names {
+    pub name: String,
+}
+
+impl Names {
+    fn stream(&self, what: &str) -> String {
+        format!("{}_{what}", self.name.to_uppercase().replace('-', "_"))
+    }
+    pub fn frames(&self, p: u32) -> String {
+        format!("{}.frames.{p}", self.name)
+    }
+    pub fn receivers(&self) -> String {
+        format!("{}.receivers", self.name)
+    }
+    pub fn events(&self, p: u32) -> String {
+        format!("{}.events.{p}", self.name)
+    }
+    pub fn sync(&self, p: u32) -> String {
+        format!("{}.sync.{p}", self.name)
+    }
+    pub fn bucket(&self, what: &str) -> String {
+        format!("{}-{what}", self.name)
+    }
+}
+
+/// Message headers the roles read.
+pub mod header {
+    /// The data time a batch runs to (s).
+    pub const TIME: &str = "Fuse1090-Time";
+    /// How many receivers had been declared when the batch was made.
+    pub const RECEIVERS: &str = "Fuse1090-Receivers";
+    /// The last batch of a partition (a replay's end).
+    pub const END: &str = "Fuse1090-End";
+    /// How many frames the batch of events came from.
+    pub const FRAMES: &str = "Fuse1090-Frames";
+}
+
+/// Reads a header as a number.
+pub(crate) fn header_f64(m: &async_nats::Message, name: &str) -> Option<f64> {
+    m.headers.as_ref()?.get(name)?.as_str().parse().ok()
+}
+
+/// The connection, the JetStream context and every stream and bucket,
+/// created if absent (each role may be the first to start).
+pub struct Nats {
+    pub client: async_nats::Client,
+    pub js: jetstream::Context,
+    pub names: Names,
+    pub frames: stream::Stream,
+    pub receivers: stream::Stream,
+    pub events: stream::Stream,
+    pub sync: stream::Stream,
+    pub claims: kv::Store,
+    pub workers: kv::Store,
+    pub checkpoints: kv::Store,
+    pub clock: kv::Store,
+}
+
+impl Nats {
+    pub async fn connect(cfg: &ClusterConfig) -> Result<Nats> {
+        let client = async_nats::ConnectOptions::new()
+            .connection_timeout(Duration::from_secs(5))
+            .name(format!("fuse1090 {:?}", cfg.roles))
+            .connect(cfg.url.as_str())
+            .await
+            .with_context(|| format!("cannot connect to NATS at {}", cfg.url))?;
+        let js = jetstream::new(client.clone());
+        let names = Names { name: cfg.name.clone() };
+        let window = Duration::from_secs(120);
+        let limits = |name: String, subjects: Vec<String>, max_bytes: i64| stream::Config {
+            name,
+            subjects,
+            max_bytes,
+            max_age: Duration::from_secs(3600),
+            duplicate_window: window,
+            ..Default::default()
+        };
+        let n = &cfg.name;
+        let frames = js
+            .get_or_create_stream(limits(
+                names.stream("FRAMES"),
+                vec![format!("{n}.frames.>")],
+                cfg.max_stream_bytes,
+            ))
+            .await
+            .context("cannot create the frame stream (is JetStream enabled: nats-server -js?)")?;
+        let receivers = js
+            .get_or_create_stream(limits(names.stream("RECEIVERS"), vec![names.receivers()], 64 << 20))
+            .await
+            .context("cannot create the receiver stream")?;
+        let events = js
+            .get_or_create_stream(limits(
+                names.stream("EVENTS"),
+                vec![format!("{n}.events.>")],
+                cfg.max_stream_bytes,
+            ))
+            .await
+            .context("cannot create the event stream")?;
+        let sync = js
+            .get_or_create_stream(limits(
+                names.stream("SYNC"),
+                vec![format!("{n}.sync.>")],
+                cfg.max_stream_bytes,
+            ))
+            .await
+            .context("cannot create the sync stream")?;
+        let lease = Duration::from_secs_f64(cfg.lease_s);
+        let bucket = |what: &str, max_age: Duration| kv::Config {
+            bucket: names.bucket(what),
+            history: 1,
+            max_age,
+            ..Default::default()
+        };
+        let claims = kv_store(&js, bucket("claims", lease)).await?;
+        let workers = kv_store(&js, bucket("workers", lease)).await?;
+        let checkpoints = kv_store(&js, bucket("checkpoints", Duration::from_secs(3600))).await?;
+        let clock = kv_store(&js, bucket("clock", Duration::from_secs(3600))).await?;
+        Ok(Nats { client, js, names, frames, receivers, events, sync, claims, workers, checkpoints, clock })
+    }
+}
+
+async fn kv_store(js: &jetstream::Context, cfg: kv::Config) -> Result<kv::Store> {
+    let name = cfg.bucket.clone();
+    match js.get_key_value(&name).await {
+        Ok(s) => Ok(s),
+        Err(_) => js.create_key_value(cfg).await.with_context(|| format!("cannot create the {name} bucket")),
+    }
+}
+
+/// Runs this process's roles until the publisher has written a replay's
+/// end, or SIGTERM/SIGINT.
+pub fn run(cfg: &Config, capture: Option<&Path>, output: Option<&Path>) -> Result<()> {
+    let cluster = cfg.cluster.clone().context("no [cluster] section")?;
+    if capture.is_some() && !cluster.has(Role::Ingest) {
+        bail!("--capture replays into the cluster: it needs the ingest role");
+    }
+    if cluster.has(Role::Ingest) && capture.is_none() {
+        bail!(
+            "the ingest role replays a capture (--capture); live receiver feeds go to a single node for now"
+        );
+    }
+    if output.is_some() && !cluster.has(Role::Publisher) {
+        bail!("--output is the publisher's: it needs the publisher role");
+    }
+    let rt =
+        tokio::runtime::Builder::new_current_thread().enable_all().build().context("cannot start tokio")?;
+    rt.block_on(async move {
+        let nats = std::sync::Arc::new(Nats::connect(&cluster).await?);
+        let worker_stats = std::sync::Arc::new(std::sync::Mutex::new(worker::WorkerStats::default()));
+        // A worker says what it did when it stops.
+        let said = worker_stats.clone();
+        let is_worker = cluster.has(Role::Worker);
+        let show = move || {
+            if is_worker {
+                println!("{}", *said.lock().expect("stats lock"));
+            }
+        };
+        let mut tasks = tokio::task::JoinSet::new();
+        let mut until_done = Vec::new();
+        if let Some(path) = capture {
+            let (nats, cluster, path) = (nats.clone(), cluster.clone(), path.to_path_buf());
+            until_done.push(
+                tasks.spawn(async move { ingest::replay(&nats, &cluster, &path).await.map(|_| ()) }).id(),
+            );
+        }
+        if cluster.has(Role::Clock) {
+            let (nats, cluster, mlat) = (nats.clone(), cluster.clone(), cfg.core.mlat.clone());
+            tasks.spawn(async move { clock::run(&nats, &cluster, &mlat).await.map(|_| ()) });
+        }
+        if cluster.has(Role::Worker) {
+            let (nats, cluster, core, shown) =
+                (nats.clone(), cluster.clone(), cfg.core.clone(), worker_stats.clone());
+            tasks.spawn(async move { worker::run(nats, cluster, core, shown).await });
+        }
+        if cluster.has(Role::Publisher) {
+            let (nats, cluster, core) = (nats.clone(), cluster.clone(), cfg.core.clone());
+            let output = output.map(Path::to_path_buf);
+            until_done.push(
+                tasks
+                    .spawn(async move { publisher::run(&nats, &cluster, &core, output).await.map(|_| ()) })
+                    .id(),
+            );
+        }
+        let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
+        loop {
+            tokio::select! {
+                done = tasks.join_next_with_id() => match done {
+                    None => return Ok(()),
+                    Some(Ok((id, res))) => {
+                        res?;
+                        until_done.retain(|&t| t != id);
+                        // A replay's publisher (or a lone ingest) is done: so is the process.
+                        if until_done.is_empty() && (capture.is_some() || output.is_some()) {
+                            nats.client.flush().await.ok();
+                            show();
+                            return Ok(());
+                        }
+                    }
+                    Some(Err(e)) => bail!("a cluster task failed: {e}"),
+                },
+                _ = term.recv() => break,
+                _ = tokio::signal::ctrl_c() => break,
+            }
+        }
+        show();
+        Ok(())
+    })
+}

@@ -1,0 +1,541 @@
+//! The worker role: claims partitions and runs one sans-IO core per
+//! partition, on a thread of its own (the processing), beside the async
+//! tasks that talk to NATS (claims, consumers, publications).
+//!
+//! A batch is processed once the worker knows every receiver it may name
+//! and the clock snapshot is at most `clock_lag_s` behind it; otherwise it
+//! waits in its partition's queue while other partitions' batches go on
+//! (a worker blocked as a whole could hold back the very partition the
+//! clock waits for). Its events and sync notes are stored before it is
+//! acknowledged; their message ids are the batch's stream sequence, so a
+//! batch processed twice (a takeover) is stored once.
+
+use std::collections::{HashMap, VecDeque};
+use std::sync::mpsc;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use async_nats::jetstream::consumer::{pull, AckPolicy, DeliverPolicy};
+use async_nats::jetstream::Message;
+use async_nats::HeaderMap;
+use futures_util::StreamExt;
+use serde::{Deserialize, Serialize};
+
+use super::wire::{self, read_batch, Checkpoint, SyncBatch};
+use super::{header, ClusterConfig, Nats};
+use crate::core::{Core, CoreConfig, Event};
+use crate::feed::capture::{ClockKind, ReceiverDecl};
+use crate::mlat::shared::SyncSnapshot;
+use crate::publish::json::write_event;
+
+/// A receiver's declaration on the receiver stream.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ReceiverMsg {
+    pub id: String,
+    pub lat: f64,
+    pub lon: f64,
+    pub alt: f64,
+    pub clock: ClockKind,
+}
+
+impl From<&ReceiverDecl> for ReceiverMsg {
+    fn from(d: &ReceiverDecl) -> Self {
+        ReceiverMsg { id: d.id.clone(), lat: d.lat, lon: d.lon, alt: d.alt, clock: d.clock }
+    }
+}
+
+impl From<ReceiverMsg> for ReceiverDecl {
+    fn from(m: ReceiverMsg) -> Self {
+        ReceiverDecl { id: m.id, lat: m.lat, lon: m.lon, alt: m.alt, clock: m.clock }
+    }
+}
+
+/// One frame batch for the processing thread.
+struct Batch {
+    p: u32,
+    t: f64,
+    receivers: usize,
+    end: bool,
+    msg: Message,
+}
+
+enum ToCore {
+    Receiver(ReceiverDecl),
+    Take(u32, Checkpoint),
+    Drop(u32),
+    Batch(Box<Batch>),
+}
+
+enum FromCore {
+    Done {
+        p: u32,
+        seq: u64,
+        t: f64,
+        end: bool,
+        frames: u64,
+        events: Vec<u8>,
+        sync: Vec<u8>,
+        msg: Box<Message>,
+    },
+    Checkpoint {
+        p: u32,
+        bytes: Vec<u8>,
+    },
+}
+
+/// What the processing thread counts.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct WorkerStats {
+    pub batches: u64,
+    pub frames: u64,
+    pub bad_batches: u64,
+    /// Receiver records of a partition's core: not published (each
+    /// partition sees a part of a receiver's traffic).
+    pub receiver_records: u64,
+    /// Clock pair updates made here: none, the clock service makes them.
+    pub sync_updates: u64,
+    pub sync_notes: u64,
+    pub partitions_taken: u64,
+}
+
+impl std::fmt::Display for WorkerStats {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "worker: batches={} frames={} bad_batches={} sync_updates={} sync_notes={} partitions_taken={}",
+            self.batches,
+            self.frames,
+            self.bad_batches,
+            self.sync_updates,
+            self.sync_notes,
+            self.partitions_taken
+        )
+    }
+}
+
+/// One partition's core and its waiting batches.
+struct Partition {
+    core: Core,
+    queue: VecDeque<Batch>,
+    started: bool,
+    next_checkpoint: f64,
+    /// Tracks created when the last checkpoint was made.
+    checkpointed_tracks: u64,
+}
+
+/// The processing thread's state.
+struct Processor {
+    cfg: ClusterConfig,
+    core_cfg: CoreConfig,
+    receivers: Vec<ReceiverDecl>,
+    parts: HashMap<u32, Partition>,
+    snapshot: Arc<Mutex<Option<Arc<SyncSnapshot>>>>,
+    loaded: Option<Arc<SyncSnapshot>>,
+    out: tokio::sync::mpsc::UnboundedSender<FromCore>,
+    stats: WorkerStats,
+    shown: Arc<Mutex<WorkerStats>>,
+}
+
+impl Processor {
+    fn handle(&mut self, m: ToCore) {
+        match m {
+            ToCore::Receiver(d) => {
+                for part in self.parts.values_mut() {
+                    part.core.add_receiver(d.clone());
+                }
+                self.receivers.push(d);
+            }
+            ToCore::Take(p, cp) => {
+                let mut core = Core::new(&self.core_cfg);
+                core.mlat_mut().share_sync();
+                core.fuser_mut().number_tracks(p as u64 + 1, self.cfg.partitions as u64);
+                core.fuser_mut().keep_track_numbers(&cp.ids, cp.next_id);
+                for d in &self.receivers {
+                    core.add_receiver(d.clone());
+                }
+                if let Some(s) = &self.loaded {
+                    core.mlat_mut().load_sync(s);
+                }
+                tracing::info!(
+                    partition = p,
+                    kept_numbers = cp.ids.len(),
+                    "partition taken: tracks start again"
+                );
+                let part = Partition {
+                    core,
+                    queue: VecDeque::new(),
+                    started: false,
+                    next_checkpoint: f64::NEG_INFINITY,
+                    checkpointed_tracks: 0,
+                };
+                self.parts.insert(p, part);
+                self.stats.partitions_taken += 1;
+            }
+            ToCore::Drop(p) => {
+                self.parts.remove(&p);
+            }
+            ToCore::Batch(b) => {
+                if let Some(part) = self.parts.get_mut(&b.p) {
+                    part.queue.push_back(*b);
+                }
+            }
+        }
+    }
+
+    /// The newest clock snapshot, loaded into every core when it changed.
+    fn refresh_clock(&mut self) {
+        let latest = self.snapshot.lock().expect("snapshot lock").clone();
+        if let Some(s) = latest {
+            if !self.loaded.as_ref().is_some_and(|l| Arc::ptr_eq(l, &s)) {
+                for part in self.parts.values_mut() {
+                    part.core.mlat_mut().load_sync(&s);
+                }
+                self.loaded = Some(s);
+            }
+        }
+    }
+
+    /// Processes every batch that may go now; whether any did.
+    fn step(&mut self) -> bool {
+        self.refresh_clock();
+        let clock_t = self.loaded.as_ref().map_or(f64::NEG_INFINITY, |s| s.t);
+        let known = self.receivers.len();
+        let lag = self.cfg.clock_lag_s;
+        let mut ready = Vec::new();
+        for (&p, part) in &mut self.parts {
+            while let Some(b) = part.queue.front() {
+                let clock_ok = !part.started || b.t - lag <= clock_t || b.end;
+                if b.receivers > known || !clock_ok {
+                    break;
+                }
+                let b = part.queue.pop_front().expect("front");
+                part.started = true;
+                ready.push((p, b));
+            }
+        }
+        let any = !ready.is_empty();
+        for (p, b) in ready {
+            self.process(p, b);
+        }
+        any
+    }
+
+    fn process(&mut self, p: u32, b: Batch) {
+        let part = self.parts.get_mut(&p).expect("a queued partition");
+        let frames_before = self.stats.frames;
+        let mut events = Vec::new();
+        let core = &mut part.core;
+        match read_batch(&b.msg.payload, |f| core.on_frame(f.rx, f.arrival, &f.frame, &mut events)) {
+            Ok(n) => self.stats.frames += n as u64,
+            Err(e) => {
+                self.stats.bad_batches += 1;
+                tracing::warn!(partition = p, error = %e, "frame batch skipped (the frames before the fault were used)");
+            }
+        }
+        part.core.advance(b.t, &mut events);
+        if b.end {
+            part.core.finish(&mut events);
+        }
+        self.stats.batches += 1;
+        let mut text = Vec::new();
+        for ev in &events {
+            if matches!(ev, Event::Receiver(_)) {
+                self.stats.receiver_records += 1;
+                continue;
+            }
+            write_event(&mut text, ev, |i| part.core.receiver_id(i));
+        }
+        let notes = part.core.mlat_mut().take_sync_notes();
+        self.stats.sync_notes += notes.len() as u64;
+        self.stats.sync_updates += part.core.mlat().sync.stats.updates;
+        let sync = wire::encode(&SyncBatch { partition: p, watermark: b.t, notes });
+        let seq = b.msg.info().map(|i| i.stream_sequence).unwrap_or(0);
+        // Stored before the batch is acknowledged (one task stores both, in
+        // order), and whenever a track was numbered: a worker taking the
+        // partition over knows every number given before its floor.
+        let created = part.core.fuser().stats().tracks_created;
+        if b.t >= part.next_checkpoint || b.end || created != part.checkpointed_tracks {
+            part.next_checkpoint = b.t + self.cfg.checkpoint_s;
+            part.checkpointed_tracks = created;
+            let (ids, next_id) = part.core.fuser().track_numbers();
+            let bytes = wire::encode(&Checkpoint { ids, next_id });
+            let _ = self.out.send(FromCore::Checkpoint { p, bytes });
+        }
+        let frames = self.stats.frames - frames_before;
+        let done =
+            FromCore::Done { p, seq, t: b.t, end: b.end, frames, events: text, sync, msg: Box::new(b.msg) };
+        let _ = self.out.send(done);
+        *self.shown.lock().expect("stats lock") = self.stats;
+    }
+
+    fn run(mut self, input: mpsc::Receiver<ToCore>) {
+        loop {
+            let waiting = self.parts.values().any(|p| !p.queue.is_empty());
+            // With batches waiting for the clock, look again soon; else sleep until work comes.
+            let got = if waiting {
+                input.recv_timeout(Duration::from_millis(2)).map_err(|_| ())
+            } else {
+                input.recv().map_err(|_| ())
+            };
+            match got {
+                Ok(m) => {
+                    self.handle(m);
+                    while let Ok(m) = input.try_recv() {
+                        self.handle(m);
+                    }
+                }
+                Err(()) if !waiting => break,
+                Err(()) => {}
+            }
+            while self.step() {}
+        }
+        tracing::info!(
+            batches = self.stats.batches,
+            frames = self.stats.frames,
+            bad = self.stats.bad_batches,
+            "worker: processing ended"
+        );
+    }
+}
+
+/// The worker role until the process ends; `shown` holds its counts.
+pub async fn run(
+    nats: Arc<Nats>,
+    cfg: ClusterConfig,
+    mut core_cfg: CoreConfig,
+    shown: Arc<Mutex<WorkerStats>>,
+) -> Result<()> {
+    // Conflicts span partitions: the publisher predicts them.
+    core_cfg.fuse.conflict.enabled = false;
+    let id = cfg.worker_id.clone().unwrap_or_else(|| {
+        let host = std::fs::read_to_string("/etc/hostname").unwrap_or_default();
+        format!("{}-{}", host.trim(), std::process::id())
+    });
+    let (to_core, core_rx) = mpsc::channel::<ToCore>();
+    let (out_tx, out_rx) = tokio::sync::mpsc::unbounded_channel::<FromCore>();
+    let snapshot = Arc::new(Mutex::new(None));
+    let processor = Processor {
+        cfg: cfg.clone(),
+        core_cfg,
+        receivers: Vec::new(),
+        parts: HashMap::new(),
+        snapshot: snapshot.clone(),
+        loaded: None,
+        out: out_tx,
+        stats: WorkerStats::default(),
+        shown,
+    };
+    std::thread::Builder::new()
+        .name("worker-core".into())
+        .spawn(move || processor.run(core_rx))
+        .context("cannot start the worker's processing thread")?;
+    let mut tasks = tokio::task::JoinSet::new();
+    tasks.spawn(watch_clock(nats.clone(), snapshot));
+    tasks.spawn(follow_receivers(nats.clone(), to_core.clone()));
+    tasks.spawn(store_results(nats.clone(), out_rx));
+    tasks.spawn(claim_partitions(nats, cfg, id, to_core));
+    match tasks.join_next().await {
+        Some(Ok(r)) => r,
+        Some(Err(e)) => Err(anyhow::anyhow!("a worker task failed: {e}")),
+        None => Ok(()),
+    }
+}
+
+/// Keeps the newest clock snapshot at hand for the processing thread.
+async fn watch_clock(nats: Arc<Nats>, latest: Arc<Mutex<Option<Arc<SyncSnapshot>>>>) -> Result<()> {
+    let mut watch =
+        nats.clock.watch_with_history("snapshot").await.context("cannot watch the clock snapshot")?;
+    while let Some(entry) = watch.next().await {
+        let entry = entry.context("clock snapshot watch")?;
+        match wire::decode::<SyncSnapshot>(&entry.value) {
+            Ok(s) => *latest.lock().expect("snapshot lock") = Some(Arc::new(s)),
+            Err(e) => tracing::warn!(error = %e, "clock snapshot unreadable: skipped"),
+        }
+    }
+    Ok(())
+}
+
+/// Every receiver declared, in order, from the first.
+async fn follow_receivers(nats: Arc<Nats>, to_core: mpsc::Sender<ToCore>) -> Result<()> {
+    let consumer = nats
+        .receivers
+        .create_consumer(async_nats::jetstream::consumer::pull::OrderedConfig {
+            deliver_policy: DeliverPolicy::All,
+            ..Default::default()
+        })
+        .await
+        .context("cannot read the receiver stream")?;
+    let mut msgs = consumer.messages().await?;
+    while let Some(m) = msgs.next().await {
+        let m = m.context("receiver stream")?;
+        match serde_json::from_slice::<ReceiverMsg>(&m.payload) {
+            Ok(r) => {
+                if to_core.send(ToCore::Receiver(r.into())).is_err() {
+                    break;
+                }
+            }
+            // Indices are positions on this stream: one skipped would shift every later one.
+            Err(e) => anyhow::bail!("receiver declaration unreadable: {e}"),
+        }
+    }
+    Ok(())
+}
+
+/// Stores each processed batch's events and sync notes, then acknowledges it.
+async fn store_results(
+    nats: Arc<Nats>,
+    mut rx: tokio::sync::mpsc::UnboundedReceiver<FromCore>,
+) -> Result<()> {
+    while let Some(r) = rx.recv().await {
+        match r {
+            FromCore::Done { p, seq, t, end, frames, events, sync, msg } => {
+                let mut h = HeaderMap::new();
+                h.insert(header::TIME, t.to_string().as_str());
+                h.insert(header::FRAMES, frames.to_string().as_str());
+                h.insert("Nats-Msg-Id", format!("e{p}-{seq}").as_str());
+                if end {
+                    h.insert(header::END, "1");
+                }
+                let ev = nats.js.publish_with_headers(nats.names.events(p), h, events.into()).await?;
+                let mut h = HeaderMap::new();
+                h.insert("Nats-Msg-Id", format!("s{p}-{seq}").as_str());
+                if end {
+                    h.insert(header::END, "1");
+                }
+                let sy = nats.js.publish_with_headers(nats.names.sync(p), h, sync.into()).await?;
+                ev.await.context("JetStream did not store events")?;
+                sy.await.context("JetStream did not store sync notes")?;
+                msg.ack().await.map_err(|e| anyhow::anyhow!("ack: {e}"))?;
+            }
+            FromCore::Checkpoint { p, bytes } => {
+                nats.checkpoints.put(p.to_string(), bytes.into()).await.context("checkpoint")?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Claims partitions, renews the claims, and consumes the claimed ones.
+async fn claim_partitions(
+    nats: Arc<Nats>,
+    cfg: ClusterConfig,
+    id: String,
+    to_core: mpsc::Sender<ToCore>,
+) -> Result<()> {
+    let every = Duration::from_secs_f64(cfg.lease_s / 3.0);
+    // Registered a while before claiming, so that workers started together share evenly.
+    nats.workers.put(&id, id.clone().into()).await.context("cannot register the worker")?;
+    tokio::time::sleep(every * 2).await;
+    let mut owned: HashMap<u32, (u64, tokio::sync::watch::Sender<bool>)> = HashMap::new();
+    let mut tick = tokio::time::interval(every);
+    loop {
+        tick.tick().await;
+        nats.workers.put(&id, id.clone().into()).await.context("cannot renew the worker's registration")?;
+        let mut lost = Vec::new();
+        for (&p, (rev, _)) in owned.iter_mut() {
+            match nats.claims.update(p.to_string(), id.clone().into(), *rev).await {
+                Ok(r) => *rev = r,
+                Err(e) => {
+                    tracing::warn!(partition = p, error = %e, "partition claim lost");
+                    lost.push(p);
+                }
+            }
+        }
+        for p in lost {
+            if let Some((_, stop)) = owned.remove(&p) {
+                let _ = stop.send(true);
+            }
+            let _ = to_core.send(ToCore::Drop(p));
+        }
+        let live = count_keys(&nats.workers).await?.max(1) as u32;
+        let share = cfg.partitions.div_ceil(live) as usize;
+        for p in 0..cfg.partitions {
+            if owned.len() >= share {
+                break;
+            }
+            if owned.contains_key(&p) {
+                continue;
+            }
+            if let Ok(rev) = nats.claims.create(p.to_string(), id.clone().into()).await {
+                let cp = match nats.checkpoints.get(p.to_string()).await {
+                    Ok(Some(b)) => wire::decode::<Checkpoint>(&b).unwrap_or_default(),
+                    _ => Checkpoint::default(),
+                };
+                let _ = to_core.send(ToCore::Take(p, cp));
+                let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+                tokio::spawn(consume(nats.clone(), cfg.clone(), p, to_core.clone(), stop_rx));
+                owned.insert(p, (rev, stop_tx));
+                tracing::info!(partition = p, worker = %id, "partition claimed");
+            }
+        }
+    }
+}
+
+async fn count_keys(store: &async_nats::jetstream::kv::Store) -> Result<usize> {
+    let mut keys = store.keys().await.context("cannot list the workers")?;
+    let mut n = 0;
+    while let Some(k) = keys.next().await {
+        k.context("listing the workers")?;
+        n += 1;
+    }
+    Ok(n)
+}
+
+/// A claimed partition's batches, in order from the first not acknowledged:
+/// the durable consumer is made again from its acknowledgement floor, so
+/// the batches a lost worker had in hand come first, not after ack_wait.
+async fn consume(
+    nats: Arc<Nats>,
+    cfg: ClusterConfig,
+    p: u32,
+    to_core: mpsc::Sender<ToCore>,
+    mut stop: tokio::sync::watch::Receiver<bool>,
+) -> Result<()> {
+    let name = format!("{}-part-{p}", cfg.name);
+    let floor = match nats.frames.consumer_info(&name).await {
+        Ok(info) => Some(info.ack_floor.stream_sequence),
+        Err(_) => None,
+    };
+    let deliver_policy = match floor {
+        Some(f) if f > 0 => DeliverPolicy::ByStartSequence { start_sequence: f + 1 },
+        _ => DeliverPolicy::All,
+    };
+    if floor.is_some() {
+        nats.frames.delete_consumer(&name).await.context("cannot reset a taken-over partition's consumer")?;
+    }
+    let consumer = nats
+        .frames
+        .create_consumer(pull::Config {
+            durable_name: Some(name.clone()),
+            filter_subject: nats.names.frames(p),
+            ack_policy: AckPolicy::Explicit,
+            ack_wait: Duration::from_secs_f64(cfg.lease_s * 10.0),
+            max_ack_pending: 64,
+            deliver_policy,
+            ..Default::default()
+        })
+        .await
+        .with_context(|| format!("cannot consume partition {p}"))?;
+    let mut msgs = consumer.messages().await?;
+    loop {
+        tokio::select! {
+            _ = stop.changed() => return Ok(()),
+            m = msgs.next() => {
+                let Some(m) = m else { return Ok(()) };
+                let m = m.map_err(|e| anyhow::anyhow!("partition {p}: {e}"))?;
+                let t = super::header_f64(&m.message, header::TIME).unwrap_or(f64::NAN);
+                let receivers = super::header_f64(&m.message, header::RECEIVERS).unwrap_or(0.0) as usize;
+                let end = m.headers.as_ref().is_some_and(|h| h.get(header::END).is_some());
+                if !t.is_finite() {
+                    tracing::warn!(partition = p, "frame batch without its time: skipped");
+                    m.ack().await.map_err(|e| anyhow::anyhow!("ack: {e}"))?;
+                    continue;
+                }
+                if to_core.send(ToCore::Batch(Box::new(Batch { p, t, receivers, end, msg: m }))).is_err() {
+                    return Ok(());
+                }
+            }
+        }
+    }
+}
