@@ -140,8 +140,16 @@ struct ClusterRun {
 }
 
 /// One cluster run over `capture`; with `kill_after`, worker 2 is killed
-/// (SIGKILL) that long after the replay was stored.
-fn run_cluster(dir: &Path, port: u16, name: &str, capture: &Path, kill_after: Option<Duration>) -> ClusterRun {
+/// (SIGKILL) that long after the replay was stored; with `garbage`, a
+/// malformed message goes on a frame, a sync and an event subject.
+fn run_cluster(
+    dir: &Path,
+    port: u16,
+    name: &str,
+    capture: &Path,
+    kill_after: Option<Duration>,
+    garbage: bool,
+) -> ClusterRun {
     let clock = spawn(&[], &config(dir, name, port, "clock"));
     // One file for the three: written again while one of them read it, it was once read empty.
     let worker_config = config(dir, name, port, "worker");
@@ -150,6 +158,13 @@ fn run_cluster(dir: &Path, port: u16, name: &str, capture: &Path, kill_after: Op
     let mut publisher = spawn(&["--output", output.to_str().unwrap()], &config(dir, name, port, "publisher"));
     // Let the workers register and share the partitions.
     std::thread::sleep(Duration::from_millis(2500));
+    if garbage {
+        // A stranger's messages on the subjects: skipped and counted, nothing else.
+        publish_garbage(
+            port,
+            &[format!("{name}.frames.3"), format!("{name}.sync.3"), format!("{name}.events.3")],
+        );
+    }
     let ingest = Command::new(BIN)
         .args(["run", "--config"])
         .arg(config(dir, name, port, "ingest"))
@@ -177,7 +192,11 @@ fn run_cluster(dir: &Path, port: u16, name: &str, capture: &Path, kill_after: Op
     let published = publisher.printed();
     let printed: Vec<String> = workers.into_iter().flatten().map(Proc::stop).collect();
     if printed.iter().any(|p| !p.contains("worker:")) {
-        for log in std::fs::read_dir(dir).unwrap().flatten().filter(|e| e.path().to_string_lossy().contains(&format!("{name}-worker"))) {
+        for log in std::fs::read_dir(dir)
+            .unwrap()
+            .flatten()
+            .filter(|e| e.path().to_string_lossy().contains(&format!("{name}-worker")))
+        {
             let text = std::fs::read_to_string(log.path()).unwrap_or_default();
             let tail: Vec<&str> = text.lines().rev().take(5).collect();
             eprintln!("{}: {tail:#?}", log.path().display());
@@ -192,6 +211,17 @@ fn run_cluster(dir: &Path, port: u16, name: &str, capture: &Path, kill_after: Op
         clock: figures(&clock_out, "clock"),
         workers,
     }
+}
+
+fn publish_garbage(port: u16, subjects: &[String]) {
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    rt.block_on(async {
+        let client = async_nats::connect(format!("127.0.0.1:{port}")).await.unwrap();
+        let js = async_nats::jetstream::new(client);
+        for s in subjects {
+            js.publish(s.clone(), "not a batch".into()).await.unwrap().await.unwrap();
+        }
+    });
 }
 
 fn row<'a>(r: &'a Report, source: &str) -> &'a Row {
@@ -288,19 +318,30 @@ fn a_cluster_of_processes_tracks_as_one_node_does_and_survives_a_killed_worker()
     assert!(String::from_utf8_lossy(&dead.stderr).contains("cannot connect to NATS"), "{dead:?}");
 
     for (name, kill) in [("whole", None), ("killed", Some(Duration::from_secs(3)))] {
-        let run = run_cluster(dir, port, name, &capture_path, kill);
+        let garbage = kill.is_none();
+        let run = run_cluster(dir, port, name, &capture_path, kill, garbage);
         let many = report(&truth, &run.output);
-        eprintln!("{name}: ingest {:?}\n publisher {:?}\n clock {:?}\n workers {:?}", run.ingest, run.publisher, run.clock, run.workers);
+        eprintln!(
+            "{name}: ingest {:?}\n publisher {:?}\n clock {:?}\n workers {:?}",
+            run.ingest, run.publisher, run.clock, run.workers
+        );
         // Nothing lost: every batch the ingest stored was processed and
         // published once, with every frame in it.
         assert_eq!(run.publisher["batches"], run.ingest["batches"], "{name}");
         assert_eq!(run.publisher["frames"], run.ingest["frames"], "{name}");
-        assert_eq!(run.publisher["bad_batches"], 0);
+        let bad: u64 = run.workers.iter().map(|w| w["bad_batches"]).sum();
+        assert_eq!(
+            (bad, run.clock["bad_batches"], run.publisher["bad_batches"]),
+            if garbage { (1, 1, 1) } else { (0, 0, 0) }
+        );
         // The clock work done once: the workers update no pair; the clock
         // service about as many as one node.
         assert!(run.workers.iter().all(|w| w["sync_updates"] == 0), "{name}: {:?}", run.workers);
         let updates = run.clock["sync_updates"] as f64;
-        assert!(within(updates, node_updates as f64, 0.02), "{name}: {updates} pair updates, one node {node_updates}");
+        assert!(
+            within(updates, node_updates as f64, 0.02),
+            "{name}: {updates} pair updates, one node {node_updates}"
+        );
         // The same aircraft tracked, as well.
         let (ids1, ids) = (track_ids(&single), track_ids(&run.output));
         assert_eq!(ids1.keys().collect::<BTreeSet<_>>(), ids.keys().collect::<BTreeSet<_>>(), "{name}");
@@ -309,7 +350,12 @@ fn a_cluster_of_processes_tracks_as_one_node_does_and_survives_a_killed_worker()
             eprintln!("{name} {source}: cluster {:.2} m, one node {:.2} m", a.h_rmse_m, b.h_rmse_m);
             // Not the same bytes (the clock arrives a batch or two late, and
             // time moves in batches): no more than 2% worse.
-            assert!(a.h_rmse_m <= 1.02 * b.h_rmse_m, "{name} {source}: {} m against {} m", a.h_rmse_m, b.h_rmse_m);
+            assert!(
+                a.h_rmse_m <= 1.02 * b.h_rmse_m,
+                "{name} {source}: {} m against {} m",
+                a.h_rmse_m,
+                b.h_rmse_m
+            );
         }
         alerts_covered(&single, &run.output);
         // No aircraft changes track number (takeovers included).

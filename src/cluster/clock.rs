@@ -162,8 +162,17 @@ pub async fn run(nats: &Nats, cfg: &ClusterConfig, mlat: &crate::mlat::MlatConfi
     }
     let s = merger.stats;
     println!(
-        "clock: batches={} notes={} applied={} sync_updates={} replayed_batches={} duplicate_resets={} snapshots={}",
-        s.batches, s.notes, s.applied, merger.clock.sync.stats.updates, s.replayed_batches, s.duplicate_resets, s.snapshots
+        "clock: batches={} notes={} applied={} sync_updates={} replayed_batches={} duplicate_resets={} \
+         unknown_receiver={} bad_batches={} snapshots={}",
+        s.batches,
+        s.notes,
+        s.applied,
+        merger.clock.sync.stats.updates,
+        s.replayed_batches,
+        s.duplicate_resets,
+        s.unknown_receiver,
+        s.bad_batches,
+        s.snapshots
     );
     Ok(s)
 }

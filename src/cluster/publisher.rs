@@ -39,6 +39,12 @@ pub struct TrackView {
 impl TrackView {
     /// A fused track record's view (`None` for anything else, or a track without height or velocity).
     pub fn parse(line: &[u8]) -> Option<(u32, TrackView)> {
+        // Most lines are not fused tracks: told apart without parsing them
+        // (the track stream writes these fields exactly so, docs/formats.md).
+        let has = |s: &[u8]| memchr::memmem::find(line, s).is_some();
+        if !has(b"\"type\":\"track\"") || !has(b"\"source\":\"fused\"") {
+            return None;
+        }
         let v: serde_json::Value = serde_json::from_slice(line).ok()?;
         if v["type"] != "track" || v["source"] != "fused" {
             return None;
@@ -206,4 +212,41 @@ pub async fn run(
         stats.batches, stats.frames, stats.lines, cross.raised, stats.replayed_batches, stats.bad_batches
     );
     Ok(stats)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn line(hex: &str, id: u64, t: f64, lon: f64, ve: f64, source: &str) -> String {
+        format!(
+            r#"{{"type":"track","id":{id},"hex":"{hex}","t":{t},"lat":48.5,"lon":{lon},"alt_m":3000.0,"alt_baro_ft":9800,"vel_enu":[{ve},0.0,0.0],"cov_en":[[100.0,0.0],[0.0,100.0]],"source":"{source}","sources":["adsb"],"period_s":1.0,"motion":"moving","adsb_suspect":false}}"#
+        )
+    }
+
+    #[test]
+    fn two_partitions_tracks_closing_head_on_raise_one_alert_then_clear_it() {
+        let mut cross = CrossPartition::new(&CoreConfig::default());
+        // 12 km apart at 48.5 N, closing at 400 m/s, same level.
+        cross.on_line(line("AAAAAA", 1, 100.0, 2.0, 200.0, "fused").as_bytes());
+        cross.on_line(line("BBBBBB", 14, 100.0, 2.0 + 12_000.0 / 73_800.0, -200.0, "fused").as_bytes());
+        // A single-source track and other records are not tracks to assess.
+        cross.on_line(line("CCCCCC", 3, 100.0, 2.08, -200.0, "adsb").as_bytes());
+        cross.on_line(br#"{"type":"mlat","hex":"DDDDDD","t":100.0}"#);
+        let mut out = Vec::new();
+        cross.advance(100.5, &mut out);
+        assert_eq!(out.len(), 1, "{out:?}");
+        let Event::Alert(crate::fuse::Alert::Conflict { pair, active, .. }) = &out[0] else {
+            panic!("{out:?}")
+        };
+        assert!(*active);
+        assert_eq!(*pair, [(0xAAAAAA, 1), (0xBBBBBB, 14)]);
+        // Tracks no longer published are no longer assessed: the alert clears.
+        out.clear();
+        cross.advance(200.0, &mut out);
+        assert!(
+            matches!(&out[..], [Event::Alert(crate::fuse::Alert::Conflict { active: false, .. })]),
+            "{out:?}"
+        );
+    }
 }

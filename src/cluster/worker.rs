@@ -17,6 +17,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use async_nats::jetstream::consumer::{pull, AckPolicy, DeliverPolicy};
+use async_nats::jetstream::context::PublishAckFuture;
 use async_nats::jetstream::Message;
 use async_nats::HeaderMap;
 use futures_util::StreamExt;
@@ -61,10 +62,14 @@ struct Batch {
 }
 
 enum ToCore {
+    /// A new clock snapshot.
+    Clock(Arc<SyncSnapshot>),
     Receiver(ReceiverDecl),
     Take(u32, Checkpoint),
     Drop(u32),
     Batch(Box<Batch>),
+    /// A message on a partition's subject that is no frame batch (skipped).
+    Bad,
 }
 
 enum FromCore {
@@ -103,13 +108,15 @@ impl std::fmt::Display for WorkerStats {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "worker: batches={} frames={} bad_batches={} sync_updates={} sync_notes={} partitions_taken={}",
+            "worker: batches={} frames={} bad_batches={} sync_updates={} sync_notes={} partitions_taken={} \
+             receiver_records_dropped={}",
             self.batches,
             self.frames,
             self.bad_batches,
             self.sync_updates,
             self.sync_notes,
-            self.partitions_taken
+            self.partitions_taken,
+            self.receiver_records
         )
     }
 }
@@ -130,7 +137,8 @@ struct Processor {
     core_cfg: CoreConfig,
     receivers: Vec<ReceiverDecl>,
     parts: HashMap<u32, Partition>,
-    snapshot: Arc<Mutex<Option<Arc<SyncSnapshot>>>>,
+    /// The newest clock snapshot, and the one the cores have.
+    latest: Option<Arc<SyncSnapshot>>,
     loaded: Option<Arc<SyncSnapshot>>,
     out: tokio::sync::mpsc::UnboundedSender<FromCore>,
     stats: WorkerStats,
@@ -140,6 +148,7 @@ struct Processor {
 impl Processor {
     fn handle(&mut self, m: ToCore) {
         match m {
+            ToCore::Clock(s) => self.latest = Some(s),
             ToCore::Receiver(d) => {
                 for part in self.parts.values_mut() {
                     part.core.add_receiver(d.clone());
@@ -175,6 +184,10 @@ impl Processor {
             ToCore::Drop(p) => {
                 self.parts.remove(&p);
             }
+            ToCore::Bad => {
+                self.stats.bad_batches += 1;
+                *self.shown.lock().expect("stats lock") = self.stats;
+            }
             ToCore::Batch(b) => {
                 if let Some(part) = self.parts.get_mut(&b.p) {
                     part.queue.push_back(*b);
@@ -185,8 +198,7 @@ impl Processor {
 
     /// The newest clock snapshot, loaded into every core when it changed.
     fn refresh_clock(&mut self) {
-        let latest = self.snapshot.lock().expect("snapshot lock").clone();
-        if let Some(s) = latest {
+        if let Some(s) = self.latest.clone() {
             if !self.loaded.as_ref().is_some_and(|l| Arc::ptr_eq(l, &s)) {
                 for part in self.parts.values_mut() {
                     part.core.mlat_mut().load_sync(&s);
@@ -270,23 +282,12 @@ impl Processor {
     }
 
     fn run(mut self, input: mpsc::Receiver<ToCore>) {
-        loop {
-            let waiting = self.parts.values().any(|p| !p.queue.is_empty());
-            // With batches waiting for the clock, look again soon; else sleep until work comes.
-            let got = if waiting {
-                input.recv_timeout(Duration::from_millis(2)).map_err(|_| ())
-            } else {
-                input.recv().map_err(|_| ())
-            };
-            match got {
-                Ok(m) => {
-                    self.handle(m);
-                    while let Ok(m) = input.try_recv() {
-                        self.handle(m);
-                    }
-                }
-                Err(()) if !waiting => break,
-                Err(()) => {}
+        // Whatever lets a waiting batch go (a snapshot, a receiver, a
+        // batch) comes on this channel: no polling.
+        while let Ok(m) = input.recv() {
+            self.handle(m);
+            while let Ok(m) = input.try_recv() {
+                self.handle(m);
             }
             while self.step() {}
         }
@@ -314,13 +315,12 @@ pub async fn run(
     });
     let (to_core, core_rx) = mpsc::channel::<ToCore>();
     let (out_tx, out_rx) = tokio::sync::mpsc::unbounded_channel::<FromCore>();
-    let snapshot = Arc::new(Mutex::new(None));
     let processor = Processor {
         cfg: cfg.clone(),
         core_cfg,
         receivers: Vec::new(),
         parts: HashMap::new(),
-        snapshot: snapshot.clone(),
+        latest: None,
         loaded: None,
         out: out_tx,
         stats: WorkerStats::default(),
@@ -331,7 +331,7 @@ pub async fn run(
         .spawn(move || processor.run(core_rx))
         .context("cannot start the worker's processing thread")?;
     let mut tasks = tokio::task::JoinSet::new();
-    tasks.spawn(watch_clock(nats.clone(), snapshot));
+    tasks.spawn(watch_clock(nats.clone(), to_core.clone()));
     tasks.spawn(follow_receivers(nats.clone(), to_core.clone()));
     tasks.spawn(store_results(nats.clone(), out_rx));
     tasks.spawn(claim_partitions(nats, cfg, id, to_core));
@@ -343,13 +343,17 @@ pub async fn run(
 }
 
 /// Keeps the newest clock snapshot at hand for the processing thread.
-async fn watch_clock(nats: Arc<Nats>, latest: Arc<Mutex<Option<Arc<SyncSnapshot>>>>) -> Result<()> {
+async fn watch_clock(nats: Arc<Nats>, to_core: mpsc::Sender<ToCore>) -> Result<()> {
     let mut watch =
         nats.clock.watch_with_history("snapshot").await.context("cannot watch the clock snapshot")?;
     while let Some(entry) = watch.next().await {
         let entry = entry.context("clock snapshot watch")?;
         match wire::decode::<SyncSnapshot>(&entry.value) {
-            Ok(s) => *latest.lock().expect("snapshot lock") = Some(Arc::new(s)),
+            Ok(s) => {
+                if to_core.send(ToCore::Clock(Arc::new(s))).is_err() {
+                    break;
+                }
+            }
             Err(e) => tracing::warn!(error = %e, "clock snapshot unreadable: skipped"),
         }
     }
@@ -382,12 +386,47 @@ async fn follow_receivers(nats: Arc<Nats>, to_core: mpsc::Sender<ToCore>) -> Res
     Ok(())
 }
 
-/// Stores each processed batch's events and sync notes, then acknowledges it.
+/// Batches whose results may be in flight at once (stored, not yet confirmed).
+const IN_FLIGHT: usize = 64;
+
+/// A batch's results sent, waiting for JetStream to confirm them.
+struct Storing {
+    events: PublishAckFuture,
+    sync: PublishAckFuture,
+    msg: Box<Message>,
+}
+
+impl Storing {
+    /// Confirmed stored: the batch is acknowledged (in order, so a
+    /// consumer's floor never passes a batch whose results are not stored).
+    async fn settle(self) -> Result<()> {
+        self.events.await.context("JetStream did not store events")?;
+        self.sync.await.context("JetStream did not store sync notes")?;
+        self.msg.ack().await.map_err(|e| anyhow::anyhow!("ack: {e}"))
+    }
+}
+
+/// Stores each processed batch's events and sync notes, then acknowledges
+/// it; up to [`IN_FLIGHT`] batches' stores overlap.
 async fn store_results(
     nats: Arc<Nats>,
     mut rx: tokio::sync::mpsc::UnboundedReceiver<FromCore>,
 ) -> Result<()> {
-    while let Some(r) = rx.recv().await {
+    let mut pending: VecDeque<Storing> = VecDeque::new();
+    loop {
+        let r = if pending.is_empty() {
+            rx.recv().await
+        } else {
+            match rx.try_recv() {
+                Ok(r) => Some(r),
+                Err(tokio::sync::mpsc::error::TryRecvError::Empty) => {
+                    pending.pop_front().expect("non-empty").settle().await?;
+                    continue;
+                }
+                Err(tokio::sync::mpsc::error::TryRecvError::Disconnected) => None,
+            }
+        };
+        let Some(r) = r else { break };
         match r {
             FromCore::Done { p, seq, t, end, frames, events, sync, msg } => {
                 let mut h = HeaderMap::new();
@@ -397,21 +436,25 @@ async fn store_results(
                 if end {
                     h.insert(header::END, "1");
                 }
-                let ev = nats.js.publish_with_headers(nats.names.events(p), h, events.into()).await?;
+                let events = nats.js.publish_with_headers(nats.names.events(p), h, events.into()).await?;
                 let mut h = HeaderMap::new();
                 h.insert("Nats-Msg-Id", format!("s{p}-{seq}").as_str());
                 if end {
                     h.insert(header::END, "1");
                 }
-                let sy = nats.js.publish_with_headers(nats.names.sync(p), h, sync.into()).await?;
-                ev.await.context("JetStream did not store events")?;
-                sy.await.context("JetStream did not store sync notes")?;
-                msg.ack().await.map_err(|e| anyhow::anyhow!("ack: {e}"))?;
+                let sync = nats.js.publish_with_headers(nats.names.sync(p), h, sync.into()).await?;
+                pending.push_back(Storing { events, sync, msg });
+                if pending.len() >= IN_FLIGHT {
+                    pending.pop_front().expect("non-empty").settle().await?;
+                }
             }
             FromCore::Checkpoint { p, bytes } => {
                 nats.checkpoints.put(p.to_string(), bytes.into()).await.context("checkpoint")?;
             }
         }
+    }
+    for s in pending {
+        s.settle().await?;
     }
     Ok(())
 }
@@ -530,6 +573,9 @@ async fn consume(
                 if !t.is_finite() {
                     tracing::warn!(partition = p, "frame batch without its time: skipped");
                     m.ack().await.map_err(|e| anyhow::anyhow!("ack: {e}"))?;
+                    if to_core.send(ToCore::Bad).is_err() {
+                        return Ok(());
+                    }
                     continue;
                 }
                 if to_core.send(ToCore::Batch(Box::new(Batch { p, t, receivers, end, msg: m }))).is_err() {
