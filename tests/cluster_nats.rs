@@ -18,6 +18,10 @@ use fuse1090::eval::{evaluate, Report, Row, Truth};
 
 const BIN: &str = env!("CARGO_BIN_EXE_fuse1090");
 
+/// One cluster at a time: side by side on two cores, a starved worker could
+/// miss its lease, and the live replay its pace.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// A child process killed when dropped (the test failing included).
 struct Proc(Child);
 
@@ -284,6 +288,7 @@ fn within(a: f64, b: f64, share: f64) -> bool {
 #[test]
 fn a_cluster_of_processes_tracks_as_one_node_does_and_survives_a_killed_worker() {
     let Some(server) = nats_server() else { return };
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let dir = common::scratch("cluster");
     let dir = dir.path();
     let (capture, truth) = common::simulated("tma-busy", 11);
@@ -369,4 +374,121 @@ fn a_cluster_of_processes_tracks_as_one_node_does_and_survives_a_killed_worker()
         }
     }
     drop(nats);
+}
+
+/// The ingest as a live service: the demo's eight receivers replayed into its
+/// Beast TCP server over loopback sockets, their frames put on the cluster,
+/// two workers, a clock and a publisher: the surface world's aircraft all
+/// tracked and multilaterated about as well as one node does offline.
+#[test]
+fn a_live_ingest_puts_its_receivers_frames_on_the_cluster() {
+    let Some(server) = nats_server() else { return };
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = common::scratch("cluster-live");
+    let dir = dir.path();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let capture = root.join("fixtures/captures/surface/capture.txt");
+    let truth = std::fs::read_to_string(root.join("fixtures/captures/surface/truth.jsonl")).unwrap();
+    let flying: BTreeSet<String> = (truth.lines())
+        .filter_map(|l| {
+            serde_json::from_str::<serde_json::Value>(l).ok()?["hex"].as_str().map(str::to_string)
+        })
+        .collect();
+    let single = dir.join("single.jsonl");
+    let out = Command::new(BIN)
+        .args(["run", "--capture"])
+        .arg(&capture)
+        .arg("--output")
+        .arg(&single)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+
+    let (nats, port) = start_nats(&server, dir);
+    let name = "live";
+    let clock = spawn(&[], &config(dir, name, port, "clock"));
+    let worker_config = config(dir, name, port, "worker");
+    let workers: Vec<Proc> = (0..2).map(|_| spawn(&[], &worker_config)).collect();
+    let output = dir.join("live.jsonl");
+    let publisher = spawn(&["--output", output.to_str().unwrap()], &config(dir, name, port, "publisher"));
+    std::thread::sleep(Duration::from_millis(2500));
+    let ingest_config = dir.join("ingest.toml");
+    let demo = common::live::demo(common::free_port(), 4.0, "kind = \"stdout\"\n");
+    let cluster = format!("\n[cluster]\nurl = \"nats://127.0.0.1:{port}\"\nname = \"{name}\"\npartitions = 12\nroles = [\"ingest\"]\n");
+    std::fs::write(&ingest_config, demo + &cluster).unwrap();
+    let ingest = spawn(&[], &ingest_config);
+    // 120 s of data at 4x, then the last batches through.
+    let started = Instant::now();
+    loop {
+        let text = std::fs::read_dir(dir)
+            .unwrap()
+            .flatten()
+            .filter(|e| e.path().to_string_lossy().contains("ingest."))
+            .map(|e| std::fs::read_to_string(e.path()).unwrap_or_default())
+            .collect::<String>();
+        if text.contains("demo replay finished") {
+            break;
+        }
+        assert!(started.elapsed() < Duration::from_secs(120), "the demo replay did not finish");
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    std::thread::sleep(Duration::from_secs(3));
+    ingest.stop();
+    std::thread::sleep(Duration::from_secs(2));
+    publisher.stop();
+    let printed: Vec<String> = workers.into_iter().map(Proc::stop).collect();
+    clock.stop();
+    // Replayed at 4x and stamped by the system clock, the live records are
+    // not on the truth's time: judged against the aircraft's own ADS-B.
+    let live_tracked = tracked(&output);
+    eprintln!(
+        "live cluster: {} aircraft tracked of {}; workers {printed:?}",
+        live_tracked.len(),
+        flying.len()
+    );
+    assert!(live_tracked.is_subset(&flying), "tracks for aircraft that do not exist: {live_tracked:?}");
+    assert_eq!(live_tracked, tracked(&single), "the aircraft one node tracks");
+    let (live_m, n_live) = fix_against_adsb(&output);
+    let (one_m, n_one) = fix_against_adsb(&single);
+    eprintln!("MLAT fix to the aircraft's ADS-B, median: live cluster {live_m:.1} m ({n_live} fixes), one node offline {one_m:.1} m ({n_one})");
+    assert!(n_live as f64 >= 0.8 * n_one as f64, "{n_live} fixes against {n_one}");
+    assert!(live_m <= 1.5 * one_m + 5.0, "fixes {live_m} m from the ADS-B, one node's {one_m} m");
+    drop(nats);
+}
+
+/// The addresses with a fused track.
+fn tracked(path: &Path) -> BTreeSet<String> {
+    track_ids(path).into_keys().collect()
+}
+
+/// The median distance (m) from each MLAT fix to the same aircraft's ADS-B
+/// position nearest in time (within 0.5 s), and how many fixes had one.
+fn fix_against_adsb(path: &Path) -> (f64, usize) {
+    // (hex, t, lat, lon) of each fix; (t, lat, lon) of each aircraft's positions.
+    let mut fixes: Vec<(String, f64, f64, f64)> = Vec::new();
+    let mut adsb: BTreeMap<String, Vec<(f64, f64, f64)>> = BTreeMap::new();
+    for line in std::io::BufReader::new(std::fs::File::open(path).unwrap()).lines() {
+        let v: serde_json::Value = serde_json::from_str(&line.unwrap()).unwrap();
+        let (Some(t), Some(lat), Some(lon)) = (v["t"].as_f64(), v["lat"].as_f64(), v["lon"].as_f64()) else {
+            continue;
+        };
+        let hex = v["hex"].as_str().unwrap_or("").to_string();
+        match v["type"].as_str() {
+            Some("mlat") => fixes.push((hex, t, lat, lon)),
+            Some("position") => adsb.entry(hex).or_default().push((t, lat, lon)),
+            _ => {}
+        }
+    }
+    let mut d: Vec<f64> = fixes
+        .iter()
+        .filter_map(|(hex, t, lat, lon)| {
+            let near = adsb.get(hex)?.iter().min_by(|a, b| (a.0 - t).abs().total_cmp(&(b.0 - t).abs()))?;
+            ((near.0 - t).abs() <= 0.5).then(|| {
+                let en = common::en(near.1, near.2, *lat, *lon);
+                en[0].hypot(en[1])
+            })
+        })
+        .collect();
+    d.sort_by(f64::total_cmp);
+    (d.get(d.len() / 2).copied().unwrap_or(f64::INFINITY), d.len())
 }

@@ -19,7 +19,7 @@ use async_nats::HeaderMap;
 
 use super::wire::{frame_address, partition_of, BatchWriter};
 use super::{header, ClusterConfig, Nats};
-use crate::feed::capture::{CaptureReader, CaptureRecord};
+use crate::feed::capture::{CaptureReader, CaptureRecord, ReceiverDecl};
 
 const IN_FLIGHT: usize = 256;
 
@@ -72,14 +72,7 @@ pub async fn replay(nats: &Nats, cfg: &ClusterConfig, capture: &Path) -> Result<
             .iter_mut()
             .enumerate()
             .map(|(p, b)| {
-                let mut h = HeaderMap::new();
-                h.insert(header::TIME, t.to_string().as_str());
-                h.insert(header::RECEIVERS, receivers.to_string().as_str());
-                h.insert("Nats-Msg-Id", format!("f{run}-{p}-{seq}").as_str());
-                if end {
-                    h.insert(header::END, "1");
-                }
-                (p as u32, h, b.take())
+                (p as u32, batch_headers(t, receivers, &format!("f{run}-{p}-{seq}"), end), b.take())
             })
             .collect::<Vec<_>>()
     };
@@ -135,4 +128,110 @@ pub async fn replay(nats: &Nats, cfg: &ClusterConfig, capture: &Path) -> Result<
     );
     println!("ingest: frames={} batches={} no_address={}", stats.frames, stats.batches, stats.no_address);
     Ok(stats)
+}
+
+/// What the live ingest's thread hands the publishing task, in order.
+pub enum Outgoing {
+    Receiver(ReceiverDecl),
+    /// One period's batch for every partition.
+    Batches(Vec<(u32, HeaderMap, Vec<u8>)>),
+}
+
+/// The live ingest: the daemon's inputs (admission, rate limits, receiver
+/// recognition: all as one node's) feed this thread instead of a core. It
+/// cuts the frames into partition batches every `batch_s` of the system
+/// clock and hands them to [`publish_live`]; the channel between them is
+/// bounded, so a NATS that cannot keep up fills the inputs' queue, whose
+/// drops are counted as one node's are.
+pub fn live_sink(
+    rx: std::sync::mpsc::Receiver<crate::live::ToCore>,
+    registry: std::sync::Arc<crate::live::registry::Registry>,
+    out: tokio::sync::mpsc::Sender<Outgoing>,
+    cfg: ClusterConfig,
+) {
+    use crate::live::ToCore;
+    use std::sync::atomic::Ordering;
+    let n = cfg.partitions;
+    let mut batches: Vec<BatchWriter> = (0..n).map(|_| BatchWriter::default()).collect();
+    let (mut receivers, mut seq, mut latest) = (0usize, 0u64, f64::NEG_INFINITY);
+    let run = std::process::id();
+    let mut tick = crate::live::unix_now() + cfg.batch_s;
+    let wait = std::time::Duration::from_secs_f64(cfg.batch_s / 4.0);
+    loop {
+        match rx.recv_timeout(wait) {
+            Ok(ToCore::Frames { rx: r, arrival, frames, from }) => {
+                from.admission.queued.fetch_sub(frames.len(), Ordering::Relaxed);
+                registry.queued.fetch_sub(frames.len(), Ordering::Relaxed);
+                latest = latest.max(arrival);
+                for frame in frames {
+                    if let Some(addr) = frame_address(&frame) {
+                        let f = crate::feed::capture::CaptureFrame { arrival, rx: r, frame };
+                        batches[partition_of(addr, n) as usize].push(&f);
+                    }
+                }
+            }
+            Ok(ToCore::AddReceiver(d)) => {
+                receivers += 1;
+                if out.blocking_send(Outgoing::Receiver(d)).is_err() {
+                    return;
+                }
+            }
+            Ok(ToCore::Outputs(_)) => {}
+            Ok(ToCore::Shutdown) | Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => return,
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+        }
+        let now = crate::live::unix_now();
+        if now < tick {
+            continue;
+        }
+        // The batch runs to the tick, or to its newest frame when the
+        // system clock's tick came before an input's stamp.
+        let t = tick.max(latest);
+        let period: Vec<(u32, HeaderMap, Vec<u8>)> = (batches.iter_mut().enumerate())
+            .map(|(p, b)| {
+                (p as u32, batch_headers(t, receivers, &format!("f{run}-{p}-{seq}"), false), b.take())
+            })
+            .collect();
+        seq += 1;
+        tick = (tick + cfg.batch_s).max(now);
+        if out.blocking_send(Outgoing::Batches(period)).is_err() {
+            return;
+        }
+    }
+}
+
+/// Stores the live ingest's receivers and batches, in order.
+pub async fn publish_live(nats: &Nats, mut rx: tokio::sync::mpsc::Receiver<Outgoing>) -> Result<()> {
+    let mut out = Publisher { nats, pending: VecDeque::new() };
+    while let Some(o) = rx.recv().await {
+        match o {
+            Outgoing::Receiver(d) => {
+                let body = serde_json::to_vec(&super::worker::ReceiverMsg::from(&d))?;
+                out.settle(0).await?;
+                nats.js
+                    .publish(nats.names.receivers(), body.into())
+                    .await?
+                    .await
+                    .context("JetStream did not store a receiver")?;
+            }
+            Outgoing::Batches(period) => {
+                for (p, h, body) in period {
+                    out.send(nats.names.frames(p), h, body).await?;
+                }
+            }
+        }
+    }
+    out.settle(0).await
+}
+
+/// A frame batch's headers.
+fn batch_headers(t: f64, receivers: usize, id: &str, end: bool) -> HeaderMap {
+    let mut h = HeaderMap::new();
+    h.insert(header::TIME, t.to_string().as_str());
+    h.insert(header::RECEIVERS, receivers.to_string().as_str());
+    h.insert("Nats-Msg-Id", id);
+    if end {
+        h.insert(header::END, "1");
+    }
+    h
 }

@@ -212,44 +212,12 @@ impl Nats {
             .with_context(|| format!("cannot connect to NATS at {}", cfg.url))?;
         let js = jetstream::new(client.clone());
         let names = Names { name: cfg.name.clone() };
-        let window = Duration::from_secs(120);
-        let limits = |name: String, subjects: Vec<String>, max_bytes: i64| stream::Config {
-            name,
-            subjects,
-            max_bytes,
-            max_age: Duration::from_secs(3600),
-            duplicate_window: window,
-            ..Default::default()
-        };
         let n = &cfg.name;
-        let frames = js
-            .get_or_create_stream(limits(
-                names.stream("FRAMES"),
-                vec![format!("{n}.frames.>")],
-                cfg.max_stream_bytes,
-            ))
-            .await
-            .context("cannot create the frame stream (is JetStream enabled: nats-server -js?)")?;
-        let receivers = js
-            .get_or_create_stream(limits(names.stream("RECEIVERS"), vec![names.receivers()], 64 << 20))
-            .await
-            .context("cannot create the receiver stream")?;
-        let events = js
-            .get_or_create_stream(limits(
-                names.stream("EVENTS"),
-                vec![format!("{n}.events.>")],
-                cfg.max_stream_bytes,
-            ))
-            .await
-            .context("cannot create the event stream")?;
-        let sync = js
-            .get_or_create_stream(limits(
-                names.stream("SYNC"),
-                vec![format!("{n}.sync.>")],
-                cfg.max_stream_bytes,
-            ))
-            .await
-            .context("cannot create the sync stream")?;
+        let max = cfg.max_stream_bytes;
+        let frames = stream(&js, &names, "FRAMES", format!("{n}.frames.>"), max).await?;
+        let receivers = stream(&js, &names, "RECEIVERS", names.receivers(), 64 << 20).await?;
+        let events = stream(&js, &names, "EVENTS", format!("{n}.events.>"), max).await?;
+        let sync = stream(&js, &names, "SYNC", format!("{n}.sync.>"), max).await?;
         let lease = Duration::from_secs_f64(cfg.lease_s);
         let bucket = |what: &str, max_age: Duration| kv::Config {
             bucket: names.bucket(what),
@@ -265,6 +233,28 @@ impl Nats {
     }
 }
 
+/// A stream of the cluster's, created if absent: bounded in bytes and age
+/// (an hour), with a two-minute window in which a message id is stored once.
+async fn stream(
+    js: &jetstream::Context,
+    names: &Names,
+    what: &str,
+    subject: String,
+    max_bytes: i64,
+) -> Result<stream::Stream> {
+    let cfg = stream::Config {
+        name: names.stream(what),
+        subjects: vec![subject],
+        max_bytes,
+        max_age: Duration::from_secs(3600),
+        duplicate_window: Duration::from_secs(120),
+        ..Default::default()
+    };
+    js.get_or_create_stream(cfg)
+        .await
+        .with_context(|| format!("cannot create the {what} stream (is JetStream enabled: nats-server -js?)"))
+}
+
 async fn kv_store(js: &jetstream::Context, cfg: kv::Config) -> Result<kv::Store> {
     let name = cfg.bucket.clone();
     match js.get_key_value(&name).await {
@@ -275,15 +265,10 @@ async fn kv_store(js: &jetstream::Context, cfg: kv::Config) -> Result<kv::Store>
 
 /// Runs this process's roles until the publisher has written a replay's
 /// end, or SIGTERM/SIGINT.
-pub fn run(cfg: &Config, capture: Option<&Path>, output: Option<&Path>) -> Result<()> {
+pub fn run(cfg: &Config, path: Option<&Path>, capture: Option<&Path>, output: Option<&Path>) -> Result<()> {
     let cluster = cfg.cluster.clone().context("no [cluster] section")?;
     if capture.is_some() && !cluster.has(Role::Ingest) {
         bail!("--capture replays into the cluster: it needs the ingest role");
-    }
-    if cluster.has(Role::Ingest) && capture.is_none() {
-        bail!(
-            "the ingest role replays a capture (--capture); live receiver feeds go to a single node for now"
-        );
     }
     if output.is_some() && !cluster.has(Role::Publisher) {
         bail!("--output is the publisher's: it needs the publisher role");
@@ -308,6 +293,11 @@ pub fn run(cfg: &Config, capture: Option<&Path>, output: Option<&Path>) -> Resul
             until_done.push(
                 tasks.spawn(async move { ingest::replay(&nats, &cluster, &path).await.map(|_| ()) }).id(),
             );
+        } else if cluster.has(Role::Ingest) {
+            // Live: the daemon's inputs, with the frames put on NATS.
+            let sink = crate::live::Sink::Cluster(nats.clone(), cluster.clone());
+            let (path, cfg) = (path.context("live ingest needs --config")?.to_path_buf(), cfg.clone());
+            tasks.spawn(async move { crate::live::serve(path, cfg, Some(sink)).await });
         }
         if cluster.has(Role::Clock) {
             let (nats, cluster, mlat) = (nats.clone(), cluster.clone(), cfg.core.mlat.clone());

@@ -129,6 +129,8 @@ struct Partition {
     next_checkpoint: f64,
     /// Tracks created when the last checkpoint was made.
     checkpointed_tracks: u64,
+    /// The core's pair updates already counted.
+    updates_seen: u64,
 }
 
 /// The processing thread's state.
@@ -177,6 +179,7 @@ impl Processor {
                     started: false,
                     next_checkpoint: f64::NEG_INFINITY,
                     checkpointed_tracks: 0,
+                    updates_seen: 0,
                 };
                 self.parts.insert(p, part);
                 self.stats.partitions_taken += 1;
@@ -260,7 +263,10 @@ impl Processor {
         }
         let notes = part.core.mlat_mut().take_sync_notes();
         self.stats.sync_notes += notes.len() as u64;
-        self.stats.sync_updates += part.core.mlat().sync.stats.updates;
+        // This core's pair updates since the last batch (none, in shared mode).
+        let updates = part.core.mlat().sync.stats.updates;
+        self.stats.sync_updates += updates - part.updates_seen;
+        part.updates_seen = updates;
         let sync = wire::encode(&SyncBatch { partition: p, watermark: b.t, notes });
         let seq = b.msg.info().map(|i| i.stream_sequence).unwrap_or(0);
         // Stored before the batch is acknowledged (one task stores both, in

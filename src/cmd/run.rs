@@ -76,7 +76,12 @@ pub fn run(args: RunArgs) -> Result<()> {
     cfg.publish_source_tracks |= args.source_tracks;
     if cfg.cluster.is_some() {
         cfg.core.publish_source_tracks = cfg.publish_source_tracks;
-        return crate::cluster::run(&cfg, args.capture.as_deref(), args.output.as_deref());
+        return crate::cluster::run(
+            &cfg,
+            args.config.as_deref(),
+            args.capture.as_deref(),
+            args.output.as_deref(),
+        );
     }
     match (&args.capture, &args.output) {
         (Some(capture), Some(output)) => {

@@ -95,7 +95,14 @@ pub fn run(config_path: &Path) -> Result<()> {
         }
     }
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build()?;
-    rt.block_on(serve(config_path.to_path_buf(), cfg))
+    rt.block_on(serve(config_path.to_path_buf(), cfg, None))
+}
+
+/// Where the inputs' frames go: the core (one node), or a cluster's
+/// ingest, which puts them on NATS for the workers ([`crate::cluster`]).
+pub enum Sink {
+    Core,
+    Cluster(Arc<crate::cluster::Nats>, crate::cluster::ClusterConfig),
 }
 
 /// Turns transparent huge pages off for the whole process.
@@ -149,7 +156,8 @@ fn realtime(priority: u8) -> std::io::Result<()> {
     }
 }
 
-async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
+/// The service until SIGTERM or SIGINT; its frames to `sink` (a core when `None`).
+pub async fn serve(path: PathBuf, cfg: Config, sink: Option<Sink>) -> Result<()> {
     let registry = Arc::new(Registry { queue_frames: cfg.service.queue_frames, ..Default::default() });
     let (http_tasks, web) = start_http(&cfg, &registry).await?;
     // Every message holds a frame or more: the frames' bound bites first.
@@ -187,9 +195,25 @@ async fn serve(path: PathBuf, cfg: Config) -> Result<()> {
     // daemon, a stale instance) fails the start, where systemd shows it.
     let bound = inputs::bind_all(&cfg.input).await.map_err(anyhow::Error::msg)?;
     let reg = registry.clone();
-    let core_thread = std::thread::Builder::new().name("core".into()).spawn(move || {
-        core_loop(core_cfg, decls, outputs, recorder, rx, reg, Extras { stats_every, state_file, web })
-    })?;
+    let core_thread = match sink {
+        None | Some(Sink::Core) => std::thread::Builder::new().name("core".into()).spawn(move || {
+            core_loop(core_cfg, decls, outputs, recorder, rx, reg, Extras { stats_every, state_file, web })
+        })?,
+        Some(Sink::Cluster(nats, cluster)) => {
+            let (out, publish) = tokio::sync::mpsc::channel(16);
+            tokio::spawn(async move {
+                if let Err(e) = crate::cluster::ingest::publish_live(&nats, publish).await {
+                    tracing::error!("ingest: {e:#}");
+                }
+            });
+            for KnownReceiver { decl, .. } in decls {
+                let _ = tx.send(ToCore::AddReceiver(decl));
+            }
+            std::thread::Builder::new()
+                .name("ingest".into())
+                .spawn(move || crate::cluster::ingest::live_sink(rx, reg, out, cluster))?
+        }
+    };
 
     let spawn_all = |list: &[InputConfig], bound: Vec<inputs::Bound>| -> Vec<tokio::task::JoinHandle<()>> {
         list.iter()
