@@ -15,7 +15,7 @@
 //! receivers' table (`receivers.rs`) and the tests (`tests.rs`).
 
 use super::survey::{enu_basis, Survey};
-use super::timing::{learn_residuals, KnownTiming, Residual, TimingModel, TimingModels, Verdict};
+use super::timing::{KnownTiming, Lessons, Residual, TimingModel, TimingModels, Verdict};
 use crate::FastMap;
 
 use super::clock::PairParams;
@@ -413,7 +413,7 @@ impl Mlat {
             ClockKind::Beast12 => {
                 let shared = self.shared.is_some();
                 let epoch_of = |ts: u64| if shared { shared_epoch(ts) } else { ts };
-                let epoch = *self.rxs[rx].beast_epoch.get_or_insert(epoch_of(ts));
+                let epoch = *self.rxs[rx].beast_epoch.get_or_insert_with(|| epoch_of(ts));
                 let local = (ts as i64 - epoch as i64) as f64 / 12e6;
                 // A counter that moved seconds more or less than the server's
                 // clock restarted (or jumped): new epoch, its pairs start again.

@@ -313,7 +313,7 @@ impl ClockSync {
 
     /// The measurement copies `a` and `b` of a sync transmission make for
     /// their pair (`None` for two GPS-timed receivers: no filter relates them).
-    #[inline]
+    #[inline(always)]
     fn pair_measurement(
         &self,
         copies: &[LocalCopy],

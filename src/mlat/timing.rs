@@ -402,6 +402,7 @@ pub enum Residual {
 }
 
 impl Residual {
+    #[inline]
     pub fn rx(&self) -> usize {
         match *self {
             Residual::Judged { rx, .. } | Residual::Against { rx, .. } => rx as usize,
@@ -413,6 +414,7 @@ impl Residual {
     /// service learns from fixes made with its models of a moment ago;
     /// taken as they came, a burst of fixes made before a correction
     /// arrived applied that correction once each, and the offsets swung.)
+    #[inline]
     fn against(&self, offset_s: f64) -> f64 {
         match *self {
             // The difference first: exactly zero, and so the residual
@@ -436,27 +438,46 @@ impl TimingModels for Vec<TimingModel> {
     }
 }
 
-/// Teaches one fix's residuals to the models, then takes
-/// their common step back: only differences of offsets are observed (a
-/// common offset is the emission time's), and left in, the common step
-/// would wander. Returns the receivers whose offsets moved.
-pub fn learn_residuals(res: &[Residual], models: &mut impl TimingModels) -> smallvec::SmallVec<[usize; 16]> {
-    let mut moved = smallvec::SmallVec::new();
-    let mut sum = 0.0;
-    for r in res {
+/// One fix's lessons being taught, one receiver at a time (in the order
+/// the fix judged them), and the common step taken back at the end.
+#[derive(Default)]
+pub struct Lessons {
+    sum: f64,
+    moved: smallvec::SmallVec<[usize; 16]>,
+}
+
+impl Lessons {
+    #[inline]
+    pub fn teach(&mut self, r: &Residual, models: &mut impl TimingModels) {
         let m = models.model(r.rx());
         let d = r.against(m.offset());
-        sum += match *r {
+        self.sum += match *r {
             Residual::Judged { h, v, .. } => m.learn_judged(d, h, v),
             Residual::Against { h, var, .. } => m.learn(d, h, var),
         };
-        moved.push(r.rx());
+        self.moved.push(r.rx());
     }
-    if !moved.is_empty() {
-        let common = sum / moved.len() as f64;
-        for &rx in &moved {
-            models.model(rx).shift(-common);
+
+    /// Only differences of offsets are observed (a common offset is the
+    /// emission time's): the lessons' common step is taken back, or it
+    /// would wander. Returns the receivers whose offsets moved.
+    #[inline]
+    pub fn finish(self, models: &mut impl TimingModels) -> smallvec::SmallVec<[usize; 16]> {
+        if !self.moved.is_empty() {
+            let common = self.sum / self.moved.len() as f64;
+            for &rx in &self.moved {
+                models.model(rx).shift(-common);
+            }
         }
+        self.moved
     }
-    moved
+}
+
+/// Teaches one fix's residuals to the models ([`Lessons`]).
+pub fn learn_residuals(res: &[Residual], models: &mut impl TimingModels) -> smallvec::SmallVec<[usize; 16]> {
+    let mut lessons = Lessons::default();
+    for r in res {
+        lessons.teach(r, models);
+    }
+    lessons.finish(models)
 }

@@ -166,7 +166,10 @@ impl Mlat {
         dropped: &Dropped,
         now: f64,
     ) {
-        let mut res: GroupVec<Residual> = GroupVec::new();
+        // In a cluster the lessons go to the clock service, which learns
+        // once for every worker; here they are learnt as they come.
+        let shared = self.shared.is_some();
+        let (mut res, mut lessons): (GroupVec<Residual>, Lessons) = Default::default();
         for (k, (site, &var)) in sites.iter().zip(sync_vars).enumerate() {
             let (r, h) = judged.at.residual(k);
             // A merged site's residual is no single receiver's (nor verdict).
@@ -179,11 +182,15 @@ impl Mlat {
             // The verdict the fix was hedged with, unless the fix weighted
             // the receiver at its floor rather than its learnt sigma.
             let used_offset_s = rx_state.timing.offset();
-            res.push(if rx_state.sigma() == rx_state.timing.sigma() {
+            let lesson = if rx_state.sigma() == rx_state.timing.sigma() {
                 Residual::Judged { rx: rx as u32, r, h, v, used_offset_s }
             } else {
                 Residual::Against { rx: rx as u32, r, h, var, used_offset_s }
-            });
+            };
+            match shared {
+                true => res.push(lesson),
+                false => lessons.teach(&lesson, &mut self.rxs),
+            }
         }
         for (m, site, var) in dropped {
             if site.len() > 1 || self.rxs[site[0]].timing_known {
@@ -191,17 +198,19 @@ impl Mlat {
             }
             let r = m.t - fix.t_emit - ecef_distance(m.pos, fix.ecef) / C_AIR;
             let used_offset_s = self.rxs[site[0]].timing.offset();
-            res.push(Residual::Against { rx: site[0] as u32, r, h: 0.0, var: *var, used_offset_s });
+            let lesson = Residual::Against { rx: site[0] as u32, r, h: 0.0, var: *var, used_offset_s };
+            match shared {
+                true => res.push(lesson),
+                false => lessons.teach(&lesson, &mut self.rxs),
+            }
         }
-        if res.is_empty() {
+        if shared {
+            if !res.is_empty() {
+                self.note_timing(now, &res);
+            }
             return;
         }
-        // In a cluster the clock service learns, once for every worker.
-        if self.note_timing(now, &res) {
-            return;
-        }
-        let moved = learn_residuals(&res, &mut self.rxs);
-        for rx in moved {
+        for rx in lessons.finish(&mut self.rxs) {
             self.sync.set_gps_bias(rx, self.rxs[rx].bias());
         }
     }

@@ -66,15 +66,8 @@ impl Mlat {
         }
     }
 
-    /// In a cluster, a fix's lessons for the receivers' timing go to the
-    /// clock service (true); on one node they are learnt here (false).
-    pub(super) fn note_timing(&mut self, now: f64, res: &[Residual]) -> bool {
-        match &mut self.shared {
-            Some(notes) => {
-                notes.push(SyncNote::Timing { now, residuals: res.to_vec() });
-                true
-            }
-            None => false,
-        }
+    /// A fix's lessons for the receivers' timing, for the clock service.
+    pub(super) fn note_timing(&mut self, now: f64, res: &[Residual]) {
+        self.note_sync(SyncNote::Timing { now, residuals: res.to_vec() });
     }
 }
