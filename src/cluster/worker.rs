@@ -102,6 +102,8 @@ pub struct WorkerStats {
     pub sync_updates: u64,
     pub sync_notes: u64,
     pub partitions_taken: u64,
+    /// Batches delivered again after a consumer was made again (skipped).
+    pub redelivered: u64,
 }
 
 impl std::fmt::Display for WorkerStats {
@@ -131,6 +133,9 @@ struct Partition {
     checkpointed_tracks: u64,
     /// The core's pair updates already counted.
     updates_seen: u64,
+    /// The stream sequence of the newest batch taken: a consumer made again
+    /// delivers again what was not yet acknowledged.
+    last_seq: u64,
 }
 
 /// The processing thread's state.
@@ -180,6 +185,7 @@ impl Processor {
                     next_checkpoint: f64::NEG_INFINITY,
                     checkpointed_tracks: 0,
                     updates_seen: 0,
+                    last_seq: 0,
                 };
                 self.parts.insert(p, part);
                 self.stats.partitions_taken += 1;
@@ -193,6 +199,12 @@ impl Processor {
             }
             ToCore::Batch(b) => {
                 if let Some(part) = self.parts.get_mut(&b.p) {
+                    let seq = b.msg.info().map_or(0, |i| i.stream_sequence);
+                    if seq != 0 && seq <= part.last_seq {
+                        self.stats.redelivered += 1;
+                        return;
+                    }
+                    part.last_seq = seq;
                     part.queue.push_back(*b);
                 }
             }
@@ -513,7 +525,7 @@ async fn claim_partitions(
                 };
                 let _ = to_core.send(ToCore::Take(p, cp));
                 let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
-                tokio::spawn(consume(nats.clone(), cfg.clone(), p, to_core.clone(), stop_rx));
+                tokio::spawn(keep_consuming(nats.clone(), cfg.clone(), p, to_core.clone(), stop_rx));
                 owned.insert(p, (rev, stop_tx));
                 tracing::info!(partition = p, worker = %id, "partition claimed");
             }
@@ -529,6 +541,26 @@ async fn count_keys(store: &async_nats::jetstream::kv::Store) -> Result<usize> {
         n += 1;
     }
     Ok(n)
+}
+
+/// Consumes a claimed partition until told to stop; a consumer that fails
+/// (NATS lost a while, the consumer deleted) is made again a second later
+/// from the acknowledgement floor: a partition left claimed but unread
+/// would hold the whole cluster back (the clock waits for it).
+async fn keep_consuming(
+    nats: Arc<Nats>,
+    cfg: ClusterConfig,
+    p: u32,
+    to_core: mpsc::Sender<ToCore>,
+    stop: tokio::sync::watch::Receiver<bool>,
+) {
+    while !*stop.borrow() {
+        match consume(nats.clone(), cfg.clone(), p, to_core.clone(), stop.clone()).await {
+            Ok(()) => return,
+            Err(e) => tracing::error!(partition = p, "partition consumer failed, starting again: {e:#}"),
+        }
+        tokio::time::sleep(Duration::from_secs(1)).await;
+    }
 }
 
 /// A claimed partition's batches, in order from the first not acknowledged:
