@@ -47,6 +47,15 @@ impl Publisher<'_> {
         Ok(())
     }
 
+    /// A receiver, stored before any later batch (which may name it) is sent.
+    async fn declare(&mut self, d: &ReceiverDecl) -> Result<()> {
+        let body = serde_json::to_vec(&super::worker::ReceiverMsg::from(d))?;
+        self.settle(0).await?;
+        let ack = self.nats.js.publish(self.nats.names.receivers(), body.into()).await?;
+        ack.await.context("JetStream did not store a receiver")?;
+        Ok(())
+    }
+
     async fn settle(&mut self, keep: usize) -> Result<()> {
         while self.pending.len() > keep {
             let ack = self.pending.pop_front().expect("non-empty");
@@ -79,13 +88,7 @@ pub async fn replay(nats: &Nats, cfg: &ClusterConfig, capture: &Path) -> Result<
     while let Some(rec) = reader.next_record().context("reading the capture")? {
         match rec {
             CaptureRecord::Receiver(d) => {
-                let body = serde_json::to_vec(&super::worker::ReceiverMsg::from(&d))?;
-                out.settle(0).await?;
-                nats.js
-                    .publish(nats.names.receivers(), body.into())
-                    .await?
-                    .await
-                    .context("JetStream did not store a receiver")?;
+                out.declare(&d).await?;
                 receivers += 1;
             }
             CaptureRecord::Frame(f) => {
@@ -205,15 +208,7 @@ pub async fn publish_live(nats: &Nats, mut rx: tokio::sync::mpsc::Receiver<Outgo
     let mut out = Publisher { nats, pending: VecDeque::new() };
     while let Some(o) = rx.recv().await {
         match o {
-            Outgoing::Receiver(d) => {
-                let body = serde_json::to_vec(&super::worker::ReceiverMsg::from(&d))?;
-                out.settle(0).await?;
-                nats.js
-                    .publish(nats.names.receivers(), body.into())
-                    .await?
-                    .await
-                    .context("JetStream did not store a receiver")?;
-            }
+            Outgoing::Receiver(d) => out.declare(&d).await?,
             Outgoing::Batches(period) => {
                 for (p, h, body) in period {
                     out.send(nats.names.frames(p), h, body).await?;
