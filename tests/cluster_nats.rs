@@ -97,13 +97,27 @@ fn start_nats(server: &Path, dir: &Path) -> (Proc, u16) {
     (Proc(child), port)
 }
 
+/// The `[cluster]` table of one role of cluster `name`.
+fn cluster_table(name: &str, port: u16, role: &str) -> String {
+    format!("[cluster]\nurl = \"nats://127.0.0.1:{port}\"\nname = \"{name}\"\npartitions = 12\nroles = [\"{role}\"]\n")
+}
+
 fn config(dir: &Path, name: &str, port: u16, role: &str) -> PathBuf {
     let path = dir.join(format!("{name}-{role}.toml"));
-    let text = format!(
-        "[cluster]\nurl = \"nats://127.0.0.1:{port}\"\nname = \"{name}\"\npartitions = 12\nroles = [\"{role}\"]\n"
-    );
-    std::fs::write(&path, text).unwrap();
+    std::fs::write(&path, cluster_table(name, port, role)).unwrap();
     path
+}
+
+/// The clock, `workers` workers and the publisher (writing `output`) of
+/// cluster `name`, once the workers have registered and shared the partitions.
+fn start_roles(dir: &Path, name: &str, port: u16, workers: usize, output: &Path) -> (Proc, Vec<Proc>, Proc) {
+    let clock = spawn(&[], &config(dir, name, port, "clock"));
+    // One file for them all: written again while one of them read it, it was once read empty.
+    let worker_config = config(dir, name, port, "worker");
+    let workers = (0..workers).map(|_| spawn(&[], &worker_config)).collect();
+    let publisher = spawn(&["--output", output.to_str().unwrap()], &config(dir, name, port, "publisher"));
+    std::thread::sleep(Duration::from_millis(2500));
+    (clock, workers, publisher)
 }
 
 /// A role's process; its log goes next to its configuration (`.log`).
@@ -154,14 +168,8 @@ fn run_cluster(
     kill_after: Option<Duration>,
     garbage: bool,
 ) -> ClusterRun {
-    let clock = spawn(&[], &config(dir, name, port, "clock"));
-    // One file for the three: written again while one of them read it, it was once read empty.
-    let worker_config = config(dir, name, port, "worker");
-    let workers: Vec<Proc> = (0..3).map(|_| spawn(&[], &worker_config)).collect();
     let output = dir.join(format!("{name}.jsonl"));
-    let mut publisher = spawn(&["--output", output.to_str().unwrap()], &config(dir, name, port, "publisher"));
-    // Let the workers register and share the partitions.
-    std::thread::sleep(Duration::from_millis(2500));
+    let (clock, workers, mut publisher) = start_roles(dir, name, port, 3, &output);
     if garbage {
         // A stranger's messages on the subjects: skipped and counted, nothing else.
         publish_garbage(
@@ -228,6 +236,19 @@ fn publish_garbage(port: u16, subjects: &[String]) {
     });
 }
 
+/// One node's `run --capture`, which must succeed.
+fn one_node(capture: &Path, output: &Path) -> std::process::Output {
+    let out = Command::new(BIN)
+        .args(["run", "--capture"])
+        .arg(capture)
+        .arg("--output")
+        .arg(output)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    out
+}
+
 fn row<'a>(r: &'a Report, source: &str) -> &'a Row {
     r.overall.iter().find(|x| x.source == source).unwrap_or_else(|| panic!("no {source} row"))
 }
@@ -236,15 +257,19 @@ fn report(truth: &Truth, path: &Path) -> Report {
     evaluate(truth, std::io::BufReader::new(std::fs::File::open(path).unwrap())).unwrap()
 }
 
+/// The records of a track stream whose line holds `needle` (all with ""), parsed.
+fn records(path: &Path, needle: &str) -> Vec<serde_json::Value> {
+    (std::io::BufReader::new(std::fs::File::open(path).unwrap()).lines())
+        .map(Result::unwrap)
+        .filter(|l| l.contains(needle))
+        .map(|l| serde_json::from_str(&l).unwrap())
+        .collect()
+}
+
 /// (hex, track id) of every fused track record, with its times.
 fn track_ids(path: &Path) -> BTreeMap<String, Vec<(f64, u64)>> {
     let mut ids: BTreeMap<String, Vec<(f64, u64)>> = BTreeMap::new();
-    for line in std::io::BufReader::new(std::fs::File::open(path).unwrap()).lines() {
-        let line = line.unwrap();
-        if !line.contains("\"type\":\"track\"") {
-            continue;
-        }
-        let v: serde_json::Value = serde_json::from_str(&line).unwrap();
+    for v in records(path, "\"type\":\"track\"") {
         if v["source"] == "fused" {
             ids.entry(v["hex"].as_str().unwrap().to_string())
                 .or_default()
@@ -256,17 +281,14 @@ fn track_ids(path: &Path) -> BTreeMap<String, Vec<(f64, u64)>> {
 
 /// Raised conflict alerts: (time, the pair).
 fn raised(path: &Path) -> Vec<(f64, (String, String))> {
-    let mut out = Vec::new();
-    for line in std::io::BufReader::new(std::fs::File::open(path).unwrap()).lines() {
-        let line = line.unwrap();
-        if !line.contains("\"kind\":\"conflict\"") {
-            continue;
-        }
-        let v: serde_json::Value = serde_json::from_str(&line).unwrap();
-        let pair = (v["pair"][0].as_str().unwrap().to_string(), v["pair"][1].as_str().unwrap().to_string());
-        out.push((v["t"].as_f64().unwrap(), pair, v["active"].as_bool().unwrap()));
-    }
-    out.into_iter().filter(|x| x.2).map(|(t, p, _)| (t, p)).collect()
+    (records(path, "\"kind\":\"conflict\"").into_iter())
+        .filter(|v| v["active"].as_bool().unwrap())
+        .map(|v| {
+            let pair =
+                (v["pair"][0].as_str().unwrap().to_string(), v["pair"][1].as_str().unwrap().to_string());
+            (v["t"].as_f64().unwrap(), pair)
+        })
+        .collect()
 }
 
 /// Whether every conflict one node raised has its pair alerted by the
@@ -295,14 +317,7 @@ fn a_cluster_of_processes_tracks_as_one_node_does_and_survives_a_killed_worker()
     let capture_path = dir.join("capture.txt");
     std::fs::write(&capture_path, &capture).unwrap();
     let single = dir.join("single.jsonl");
-    let out = Command::new(BIN)
-        .args(["run", "--capture"])
-        .arg(&capture_path)
-        .arg("--output")
-        .arg(&single)
-        .output()
-        .unwrap();
-    assert!(out.status.success());
+    let out = one_node(&capture_path, &single);
     let one = report(&truth, &single);
     let stderr = String::from_utf8_lossy(&out.stderr);
     let node_updates: u64 = stderr
@@ -395,27 +410,15 @@ fn a_live_ingest_puts_its_receivers_frames_on_the_cluster() {
         })
         .collect();
     let single = dir.join("single.jsonl");
-    let out = Command::new(BIN)
-        .args(["run", "--capture"])
-        .arg(&capture)
-        .arg("--output")
-        .arg(&single)
-        .output()
-        .unwrap();
-    assert!(out.status.success());
+    one_node(&capture, &single);
 
     let (nats, port) = start_nats(&server, dir);
     let name = "live";
-    let clock = spawn(&[], &config(dir, name, port, "clock"));
-    let worker_config = config(dir, name, port, "worker");
-    let workers: Vec<Proc> = (0..2).map(|_| spawn(&[], &worker_config)).collect();
     let output = dir.join("live.jsonl");
-    let publisher = spawn(&["--output", output.to_str().unwrap()], &config(dir, name, port, "publisher"));
-    std::thread::sleep(Duration::from_millis(2500));
+    let (clock, workers, publisher) = start_roles(dir, name, port, 2, &output);
     let ingest_config = dir.join("ingest.toml");
     let demo = common::live::demo(common::free_port(), 4.0, "kind = \"stdout\"\n");
-    let cluster = format!("\n[cluster]\nurl = \"nats://127.0.0.1:{port}\"\nname = \"{name}\"\npartitions = 12\nroles = [\"ingest\"]\n");
-    std::fs::write(&ingest_config, demo + &cluster).unwrap();
+    std::fs::write(&ingest_config, demo + "\n" + &cluster_table(name, port, "ingest")).unwrap();
     let ingest = spawn(&[], &ingest_config);
     // 120 s of data at 4x, then the last batches through.
     let started = Instant::now();
@@ -467,8 +470,7 @@ fn fix_against_adsb(path: &Path) -> (f64, usize) {
     // (hex, t, lat, lon) of each fix; (t, lat, lon) of each aircraft's positions.
     let mut fixes: Vec<(String, f64, f64, f64)> = Vec::new();
     let mut adsb: BTreeMap<String, Vec<(f64, f64, f64)>> = BTreeMap::new();
-    for line in std::io::BufReader::new(std::fs::File::open(path).unwrap()).lines() {
-        let v: serde_json::Value = serde_json::from_str(&line.unwrap()).unwrap();
+    for v in records(path, "") {
         let (Some(t), Some(lat), Some(lon)) = (v["t"].as_f64(), v["lat"].as_f64(), v["lon"].as_f64()) else {
             continue;
         };

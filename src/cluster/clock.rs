@@ -15,7 +15,7 @@ use async_nats::jetstream::consumer::{pull, AckPolicy, DeliverPolicy};
 use futures_util::StreamExt;
 
 use super::wire::{self, SyncBatch};
-use super::{header, ClusterConfig, Nats};
+use super::{ClusterConfig, Mark, Nats, Watermarks};
 use crate::mlat::clock::PairParams;
 use crate::mlat::shared::{Applied, SharedClock, SyncNote, SyncSnapshot};
 use crate::mlat::sync::ClockSync;
@@ -35,8 +35,7 @@ pub struct ClockStats {
 /// Notes from every partition, applied in time order up to the time all have reached.
 pub struct Merger {
     pub clock: SharedClock,
-    watermarks: Vec<f64>,
-    ended: Vec<bool>,
+    marks: Watermarks,
     waiting: Vec<(f64, u32, u64, SyncNote)>,
     arrivals: u64,
     applied_to: f64,
@@ -47,8 +46,7 @@ impl Merger {
     pub fn new(partitions: u32, params: PairParams) -> Self {
         Merger {
             clock: SharedClock::new(ClockSync::new(params)),
-            watermarks: vec![f64::NEG_INFINITY; partitions as usize],
-            ended: vec![false; partitions as usize],
+            marks: Watermarks::new(partitions),
             waiting: Vec::new(),
             arrivals: 0,
             applied_to: f64::NEG_INFINITY,
@@ -58,27 +56,24 @@ impl Merger {
 
     /// One worker batch; a new snapshot when the common time moved on.
     pub fn on_batch(&mut self, b: SyncBatch, end: bool) -> Option<SyncSnapshot> {
-        let p = b.partition as usize;
-        if p >= self.watermarks.len() {
-            self.stats.bad_batches += 1;
-            return None;
+        match self.marks.mark(b.partition as usize, b.watermark, end) {
+            Mark::Unknown => {
+                self.stats.bad_batches += 1;
+                return None;
+            }
+            Mark::Replayed => {
+                self.stats.batches += 1;
+                self.stats.replayed_batches += 1;
+                return None;
+            }
+            Mark::New => self.stats.batches += 1,
         }
-        self.stats.batches += 1;
-        if b.watermark <= self.watermarks[p] {
-            self.stats.replayed_batches += 1;
-            return None;
-        }
-        self.watermarks[p] = b.watermark;
-        self.ended[p] |= end;
         for note in b.notes {
             self.stats.notes += 1;
             self.arrivals += 1;
             self.waiting.push((note.now(), b.partition, self.arrivals, note));
         }
-        // A partition that has ended holds nobody back.
-        let common = (self.watermarks.iter().zip(&self.ended))
-            .map(|(&w, &e)| if e { f64::INFINITY } else { w })
-            .fold(f64::INFINITY, f64::min);
+        let common = self.marks.common();
         if common <= self.applied_to {
             return None;
         }
@@ -93,27 +88,19 @@ impl Merger {
         }
         self.applied_to = common;
         self.stats.snapshots += 1;
-        let t = if common.is_finite() {
-            common
-        } else {
-            self.watermarks.iter().cloned().fold(f64::MIN, f64::max)
-        };
+        let t = if common.is_finite() { common } else { self.marks.newest() };
         Some(self.clock.snapshot(t))
     }
 
     pub fn all_ended(&self) -> bool {
-        self.ended.iter().all(|&e| e)
+        self.marks.all_ended()
     }
 }
 
 pub async fn run(nats: &Nats, cfg: &ClusterConfig, mlat: &crate::mlat::MlatConfig) -> Result<ClockStats> {
     let mut merger = Merger::new(cfg.partitions, crate::mlat::engine::pair_params(mlat));
     // The receivers, in declaration order, before notes name them.
-    let receivers = nats
-        .receivers
-        .create_consumer(pull::OrderedConfig { deliver_policy: DeliverPolicy::All, ..Default::default() })
-        .await?;
-    let mut receiver_msgs = receivers.messages().await?;
+    let mut declared = nats.receiver_declarations().await?;
     let name = format!("{}-clock", cfg.name);
     // Started again, the clock relearns: its notes from the start are long gone or stale.
     let _ = nats.sync.delete_consumer(&name).await;
@@ -133,16 +120,15 @@ pub async fn run(nats: &Nats, cfg: &ClusterConfig, mlat: &crate::mlat::MlatConfi
         tokio::select! {
             // Declarations first: a note may name a receiver only just declared.
             biased;
-            r = receiver_msgs.next() => {
-                let Some(r) = r else { break };
-                let r = r.context("receiver stream")?;
-                let d: super::worker::ReceiverMsg = serde_json::from_slice(&r.payload).context("receiver declaration unreadable")?;
+            d = declared.next() => {
+                let Some(d) = d else { break };
+                let d = d?;
                 merger.clock.add_receiver(d.clock, &d.id, crate::mlat::engine::timing_prior(mlat, d.clock));
             }
             m = msgs.next() => {
                 let Some(m) = m else { break };
                 let m = m.map_err(|e| anyhow::anyhow!("sync stream: {e}"))?;
-                let end = m.headers.as_ref().is_some_and(|h| h.get(header::END).is_some());
+                let end = super::is_end(&m.message);
                 let batch = match wire::decode::<SyncBatch>(&m.payload) {
                     Ok(b) => b,
                     Err(e) => {

@@ -18,8 +18,8 @@ use async_nats::jetstream::context::PublishAckFuture;
 use async_nats::HeaderMap;
 
 use super::wire::{frame_address, partition_of, BatchWriter};
-use super::{header, ClusterConfig, Nats};
-use crate::feed::capture::{CaptureReader, CaptureRecord, ReceiverDecl};
+use super::{header, headers, ClusterConfig, Nats};
+use crate::feed::capture::{CaptureFrame, CaptureReader, CaptureRecord, ReceiverDecl};
 
 const IN_FLIGHT: usize = 256;
 
@@ -30,6 +30,53 @@ pub struct IngestStats {
     pub batches: u64,
     /// Mode A/C replies: no address, no partition (a node ignores them too).
     pub no_address: u64,
+}
+
+/// Frames cut into one batch per partition, handed out a period at a time
+/// (every partition's batch, empty or not, with the period's time).
+struct Batcher {
+    batches: Vec<BatchWriter>,
+    /// Receivers declared so far: a batch may name any of them.
+    receivers: usize,
+    seq: u64,
+    /// The run's identity in message ids: a replay started again is new data.
+    run: u32,
+    stats: IngestStats,
+}
+
+impl Batcher {
+    fn new(partitions: u32) -> Self {
+        let batches = (0..partitions).map(|_| BatchWriter::default()).collect();
+        Batcher { batches, receivers: 0, seq: 0, run: std::process::id(), stats: IngestStats::default() }
+    }
+
+    fn push(&mut self, f: &CaptureFrame) {
+        match frame_address(&f.frame) {
+            Some(addr) => {
+                let n = self.batches.len() as u32;
+                self.batches[partition_of(addr, n) as usize].push(f);
+                self.stats.frames += 1;
+            }
+            None => self.stats.no_address += 1,
+        }
+    }
+
+    /// Every partition's batch, running to `t`.
+    fn period(&mut self, t: f64, end: bool) -> Vec<(u32, HeaderMap, Vec<u8>)> {
+        let (run, seq, receivers) = (self.run, self.seq, self.receivers as f64);
+        self.seq += 1;
+        self.stats.batches += self.batches.len() as u64;
+        (self.batches.iter_mut().enumerate())
+            .map(|(p, b)| {
+                let h = headers(
+                    &format!("f{run}-{p}-{seq}"),
+                    end,
+                    &[(header::TIME, t), (header::RECEIVERS, receivers)],
+                );
+                (p as u32, h, b.take())
+            })
+            .collect()
+    }
 }
 
 struct Publisher<'a> {
@@ -47,9 +94,17 @@ impl Publisher<'_> {
         Ok(())
     }
 
+    /// A period's batches, one per partition.
+    async fn send_all(&mut self, period: Vec<(u32, HeaderMap, Vec<u8>)>) -> Result<()> {
+        for (p, h, body) in period {
+            self.send(self.nats.names.frames(p), h, body).await?;
+        }
+        Ok(())
+    }
+
     /// A receiver, stored before any later batch (which may name it) is sent.
     async fn declare(&mut self, d: &ReceiverDecl) -> Result<()> {
-        let body = serde_json::to_vec(&super::worker::ReceiverMsg::from(d))?;
+        let body = serde_json::to_vec(d)?;
         self.settle(0).await?;
         let ack = self.nats.js.publish(self.nats.names.receivers(), body.into()).await?;
         ack.await.context("JetStream did not store a receiver")?;
@@ -69,59 +124,30 @@ pub async fn replay(nats: &Nats, cfg: &ClusterConfig, capture: &Path) -> Result<
     let file = std::fs::File::open(capture).with_context(|| format!("cannot open {}", capture.display()))?;
     let mut reader =
         CaptureReader::new(BufReader::with_capacity(1 << 20, file), capture.display().to_string());
-    let n = cfg.partitions;
-    let mut batches: Vec<BatchWriter> = (0..n).map(|_| BatchWriter::default()).collect();
+    let mut batcher = Batcher::new(cfg.partitions);
     let mut out = Publisher { nats, pending: VecDeque::new() };
-    let mut stats = IngestStats::default();
-    let (mut receivers, mut tick, mut seq) = (0usize, None::<f64>, 0u64);
-    // The run's identity in message ids: a replay started again is new data.
-    let run = std::process::id();
-    let flush = |batches: &mut Vec<BatchWriter>, t: f64, seq: u64, receivers: usize, end: bool| {
-        batches
-            .iter_mut()
-            .enumerate()
-            .map(|(p, b)| {
-                (p as u32, batch_headers(t, receivers, &format!("f{run}-{p}-{seq}"), end), b.take())
-            })
-            .collect::<Vec<_>>()
-    };
+    let mut tick = None::<f64>;
     while let Some(rec) = reader.next_record().context("reading the capture")? {
         match rec {
             CaptureRecord::Receiver(d) => {
                 out.declare(&d).await?;
-                receivers += 1;
+                batcher.receivers += 1;
             }
             CaptureRecord::Frame(f) => {
-                let t0 = *tick.get_or_insert(f.arrival + cfg.batch_s);
-                if f.arrival >= t0 {
-                    // Batches end on the tick before this frame (several, empty, over a gap).
-                    let mut t = t0;
-                    while f.arrival >= t {
-                        for (p, h, body) in flush(&mut batches, t, seq, receivers, false) {
-                            out.send(nats.names.frames(p), h, body).await?;
-                        }
-                        stats.batches += n as u64;
-                        seq += 1;
-                        t += cfg.batch_s;
-                    }
-                    tick = Some(t);
+                let mut t = *tick.get_or_insert(f.arrival + cfg.batch_s);
+                // Batches end on the tick before this frame (several, empty, over a gap).
+                while f.arrival >= t {
+                    out.send_all(batcher.period(t, false)).await?;
+                    t += cfg.batch_s;
                 }
-                match frame_address(&f.frame) {
-                    Some(addr) => {
-                        batches[partition_of(addr, n) as usize].push(&f);
-                        stats.frames += 1;
-                    }
-                    None => stats.no_address += 1,
-                }
+                tick = Some(t);
+                batcher.push(&f);
             }
         }
     }
-    let t = tick.unwrap_or(0.0);
-    for (p, h, body) in flush(&mut batches, t, seq, receivers, true) {
-        out.send(nats.names.frames(p), h, body).await?;
-    }
-    stats.batches += n as u64;
+    out.send_all(batcher.period(tick.unwrap_or(0.0), true)).await?;
     out.settle(0).await?;
+    let stats = batcher.stats;
     tracing::info!(
         frames = stats.frames,
         batches = stats.batches,
@@ -154,10 +180,8 @@ pub fn live_sink(
 ) {
     use crate::live::ToCore;
     use std::sync::atomic::Ordering;
-    let n = cfg.partitions;
-    let mut batches: Vec<BatchWriter> = (0..n).map(|_| BatchWriter::default()).collect();
-    let (mut receivers, mut seq, mut latest) = (0usize, 0u64, f64::NEG_INFINITY);
-    let run = std::process::id();
+    let mut batcher = Batcher::new(cfg.partitions);
+    let mut latest = f64::NEG_INFINITY;
     let mut tick = crate::live::unix_now() + cfg.batch_s;
     let wait = std::time::Duration::from_secs_f64(cfg.batch_s / 4.0);
     loop {
@@ -167,14 +191,11 @@ pub fn live_sink(
                 registry.queued.fetch_sub(frames.len(), Ordering::Relaxed);
                 latest = latest.max(arrival);
                 for frame in frames {
-                    if let Some(addr) = frame_address(&frame) {
-                        let f = crate::feed::capture::CaptureFrame { arrival, rx: r, frame };
-                        batches[partition_of(addr, n) as usize].push(&f);
-                    }
+                    batcher.push(&CaptureFrame { arrival, rx: r, frame });
                 }
             }
             Ok(ToCore::AddReceiver(d)) => {
-                receivers += 1;
+                batcher.receivers += 1;
                 if out.blocking_send(Outgoing::Receiver(d)).is_err() {
                     return;
                 }
@@ -189,13 +210,7 @@ pub fn live_sink(
         }
         // The batch runs to the tick, or to its newest frame when the
         // system clock's tick came before an input's stamp.
-        let t = tick.max(latest);
-        let period: Vec<(u32, HeaderMap, Vec<u8>)> = (batches.iter_mut().enumerate())
-            .map(|(p, b)| {
-                (p as u32, batch_headers(t, receivers, &format!("f{run}-{p}-{seq}"), false), b.take())
-            })
-            .collect();
-        seq += 1;
+        let period = batcher.period(tick.max(latest), false);
         tick = (tick + cfg.batch_s).max(now);
         if out.blocking_send(Outgoing::Batches(period)).is_err() {
             return;
@@ -209,24 +224,8 @@ pub async fn publish_live(nats: &Nats, mut rx: tokio::sync::mpsc::Receiver<Outgo
     while let Some(o) = rx.recv().await {
         match o {
             Outgoing::Receiver(d) => out.declare(&d).await?,
-            Outgoing::Batches(period) => {
-                for (p, h, body) in period {
-                    out.send(nats.names.frames(p), h, body).await?;
-                }
-            }
+            Outgoing::Batches(period) => out.send_all(period).await?,
         }
     }
     out.settle(0).await
-}
-
-/// A frame batch's headers.
-fn batch_headers(t: f64, receivers: usize, id: &str, end: bool) -> HeaderMap {
-    let mut h = HeaderMap::new();
-    h.insert(header::TIME, t.to_string().as_str());
-    h.insert(header::RECEIVERS, receivers.to_string().as_str());
-    h.insert("Nats-Msg-Id", id);
-    if end {
-        h.insert(header::END, "1");
-    }
-    h
 }

@@ -181,9 +181,84 @@ pub mod header {
     pub const FRAMES: &str = "Fuse1090-Frames";
 }
 
+/// How far each partition's batches have come, for a stage that waits for
+/// all of them (the clock, the publisher). A partition that has ended holds
+/// nobody back.
+pub struct Watermarks {
+    at: Vec<f64>,
+    ended: Vec<bool>,
+}
+
+/// What a partition's batch is to the stage.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mark {
+    /// Beyond the time the partition had reached: taken.
+    New,
+    /// At or below it: a replay after a takeover, already taken once.
+    Replayed,
+    /// No such partition.
+    Unknown,
+}
+
+impl Watermarks {
+    pub fn new(partitions: u32) -> Self {
+        Watermarks {
+            at: vec![f64::NEG_INFINITY; partitions as usize],
+            ended: vec![false; partitions as usize],
+        }
+    }
+
+    /// Partition `p`'s batch running to `t` (its last when `end`).
+    pub fn mark(&mut self, p: usize, t: f64, end: bool) -> Mark {
+        match self.at.get_mut(p) {
+            None => Mark::Unknown,
+            Some(at) if t <= *at => Mark::Replayed,
+            Some(at) => {
+                *at = t;
+                self.ended[p] |= end;
+                Mark::New
+            }
+        }
+    }
+
+    /// The time every partition still running has reached (infinite once all have ended).
+    pub fn common(&self) -> f64 {
+        (self.at.iter().zip(&self.ended)).filter(|(_, &e)| !e).map(|(&w, _)| w).fold(f64::INFINITY, f64::min)
+    }
+
+    /// The furthest any partition has reached.
+    pub fn newest(&self) -> f64 {
+        self.at.iter().cloned().fold(f64::MIN, f64::max)
+    }
+
+    pub fn all_ended(&self) -> bool {
+        self.ended.iter().all(|&e| e)
+    }
+}
+
 /// Reads a header as a number.
 pub(crate) fn header_f64(m: &async_nats::Message, name: &str) -> Option<f64> {
     m.headers.as_ref()?.get(name)?.as_str().parse().ok()
+}
+
+/// Whether a message is a partition's last (a replay's end).
+pub(crate) fn is_end(m: &async_nats::Message) -> bool {
+    m.headers.as_ref().is_some_and(|h| h.get(header::END).is_some())
+}
+
+/// The headers of a message a role stores: its id (JetStream stores one
+/// message per id within its window), the numbers it carries, and the end
+/// mark on a partition's last.
+pub(crate) fn headers(id: &str, end: bool, numbers: &[(&str, f64)]) -> async_nats::HeaderMap {
+    let mut h = async_nats::HeaderMap::new();
+    h.insert("Nats-Msg-Id", id);
+    for (name, v) in numbers {
+        h.insert(*name, v.to_string().as_str());
+    }
+    if end {
+        h.insert(header::END, "1");
+    }
+    h
 }
 
 /// The connection, the JetStream context and every stream and bucket,
@@ -230,6 +305,27 @@ impl Nats {
         let checkpoints = kv_store(&js, bucket("checkpoints", Duration::from_secs(3600))).await?;
         let clock = kv_store(&js, bucket("clock", Duration::from_secs(3600))).await?;
         Ok(Nats { client, js, names, frames, receivers, events, sync, claims, workers, checkpoints, clock })
+    }
+}
+
+impl Nats {
+    /// Every receiver declared, in declaration order from the first (the
+    /// order gives each its index, so one unreadable is an error, not a skip).
+    pub async fn receiver_declarations(
+        &self,
+    ) -> Result<impl futures_util::Stream<Item = Result<crate::feed::capture::ReceiverDecl>> + use<>> {
+        let consumer = (self.receivers)
+            .create_consumer(jetstream::consumer::pull::OrderedConfig {
+                deliver_policy: jetstream::consumer::DeliverPolicy::All,
+                ..Default::default()
+            })
+            .await
+            .context("cannot read the receiver stream")?;
+        let msgs = consumer.messages().await.context("cannot read the receiver stream")?;
+        Ok(futures_util::StreamExt::map(msgs, |m| {
+            let m = m.context("receiver stream")?;
+            serde_json::from_slice(&m.payload).context("receiver declaration unreadable")
+        }))
     }
 }
 

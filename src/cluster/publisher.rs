@@ -15,12 +15,11 @@ use anyhow::{Context, Result};
 use async_nats::jetstream::consumer::{pull, AckPolicy, DeliverPolicy};
 use futures_util::StreamExt;
 
-use super::{header, ClusterConfig, Nats};
+use super::{header, ClusterConfig, Mark, Nats, Watermarks};
 use crate::core::{CoreConfig, Event};
-use crate::fuse::conflict::Kinematics;
+use crate::fuse::conflict::{kinematics_at, Seen};
 use crate::fuse::{ConflictConfig, ConflictMonitor, Output, MIN_CONFLICT_SPEED_MPS};
 use crate::publish::json::write_event;
-use crate::track::plane::Plane;
 use crate::FastMap;
 
 /// The newest published fused track of an aircraft, as conflict prediction reads it.
@@ -98,27 +97,20 @@ impl CrossPartition {
         }
         let coast = self.coast_after_s;
         self.tracks.retain(|_, v| now - v.t <= coast + v.period_s + 60.0);
-        let mut seen: Vec<(u32, &TrackView)> = (self.tracks.iter())
+        let seen: Vec<Seen> = (self.tracks.iter())
             .filter(|(_, v)| now - v.t <= coast + v.period_s)
             .filter(|(_, v)| v.vel_enu[0].hypot(v.vel_enu[1]) >= MIN_CONFLICT_SPEED_MPS)
-            .map(|(&a, v)| (a, v))
+            .map(|(&addr, v)| Seen {
+                addr,
+                t: v.t,
+                lat: v.lat,
+                lon: v.lon,
+                alt_m: v.alt_m,
+                vel_enu: v.vel_enu,
+                alt_ft: v.alt_baro_ft.unwrap_or(v.alt_m / crate::geo::FT_TO_M),
+            })
             .collect();
-        seen.sort_unstable_by_key(|s| s.0);
-        let kin: Vec<Kinematics> = match seen.first() {
-            None => Vec::new(),
-            Some(first) => {
-                let origin = Plane::new(first.1.lat, first.1.lon, 0.0);
-                (seen.iter())
-                    .map(|&(addr, v)| {
-                        let en = origin.to_en(v.lat, v.lon);
-                        let (vel, dt) = (v.vel_enu, (now - v.t).max(0.0));
-                        let pos = [en[0] + vel[0] * dt, en[1] + vel[1] * dt, v.alt_m + vel[2] * dt];
-                        let alt_ft = v.alt_baro_ft.unwrap_or(v.alt_m / crate::geo::FT_TO_M);
-                        Kinematics { addr, pos, vel, alt_ft }
-                    })
-                    .collect()
-            }
-        };
+        let kin = kinematics_at(now, seen);
         let tracks = &self.tracks;
         let mut alerts = Vec::new();
         let id = |a: u32| tracks.get(&a).map_or(0, |v| v.id);
@@ -149,8 +141,7 @@ pub async fn run(
         )),
         None => Box::new(std::io::sink()),
     };
-    let n = cfg.partitions as usize;
-    let (mut watermarks, mut ended) = (vec![f64::NEG_INFINITY; n], vec![false; n]);
+    let mut marks = Watermarks::new(cfg.partitions);
     let mut cross = CrossPartition::new(core);
     let mut stats = PublisherStats::default();
     let name = format!("{}-publisher", cfg.name);
@@ -171,29 +162,30 @@ pub async fn run(
     let (mut alerts, mut text) = (Vec::new(), Vec::new());
     while let Some(m) = msgs.next().await {
         let m = m.map_err(|e| anyhow::anyhow!("event stream: {e}"))?;
-        let p = m.subject.rsplit('.').next().and_then(|s| s.parse::<usize>().ok()).filter(|&p| p < n);
+        let p = m.subject.rsplit('.').next().and_then(|s| s.parse::<usize>().ok());
         let t = super::header_f64(&m.message, header::TIME);
-        let (Some(p), Some(t)) = (p, t) else {
-            stats.bad_batches += 1;
-            continue;
+        let mark = match (p, t) {
+            (Some(p), Some(t)) => marks.mark(p, t, super::is_end(&m.message)),
+            _ => Mark::Unknown,
         };
-        if t <= watermarks[p] {
-            stats.replayed_batches += 1;
-            continue;
+        match mark {
+            Mark::Unknown => {
+                stats.bad_batches += 1;
+                continue;
+            }
+            Mark::Replayed => {
+                stats.replayed_batches += 1;
+                continue;
+            }
+            Mark::New => stats.batches += 1,
         }
-        watermarks[p] = t;
-        ended[p] |= m.headers.as_ref().is_some_and(|h| h.get(header::END).is_some());
-        stats.batches += 1;
         stats.frames += super::header_f64(&m.message, header::FRAMES).unwrap_or(0.0) as u64;
         out.write_all(&m.payload).context("writing output")?;
         for line in m.payload.split(|&b| b == b'\n').filter(|l| !l.is_empty()) {
             stats.lines += 1;
             cross.on_line(line);
         }
-        let common = (watermarks.iter().zip(&ended))
-            .filter(|(_, &e)| !e)
-            .map(|(&w, _)| w)
-            .fold(f64::INFINITY, f64::min);
+        let common = marks.common();
         if common.is_finite() {
             cross.advance(common, &mut alerts);
         }
@@ -202,7 +194,7 @@ pub async fn run(
             write_event(&mut text, &ev, |_| "?");
             out.write_all(&text).context("writing output")?;
         }
-        if ended.iter().all(|&e| e) {
+        if marks.all_ended() {
             break;
         }
     }

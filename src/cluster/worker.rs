@@ -19,42 +19,20 @@ use anyhow::{Context, Result};
 use async_nats::jetstream::consumer::{pull, AckPolicy, DeliverPolicy};
 use async_nats::jetstream::context::PublishAckFuture;
 use async_nats::jetstream::Message;
-use async_nats::HeaderMap;
 use futures_util::StreamExt;
-use serde::{Deserialize, Serialize};
 
 use super::wire::{self, read_batch, Checkpoint, SyncBatch};
-use super::{header, ClusterConfig, Nats};
+use super::{header, headers, ClusterConfig, Nats};
 use crate::core::{Core, CoreConfig, Event};
-use crate::feed::capture::{ClockKind, ReceiverDecl};
+use crate::feed::capture::ReceiverDecl;
 use crate::mlat::shared::SyncSnapshot;
 use crate::publish::json::write_event;
-
-/// A receiver's declaration on the receiver stream.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct ReceiverMsg {
-    pub id: String,
-    pub lat: f64,
-    pub lon: f64,
-    pub alt: f64,
-    pub clock: ClockKind,
-}
-
-impl From<&ReceiverDecl> for ReceiverMsg {
-    fn from(d: &ReceiverDecl) -> Self {
-        ReceiverMsg { id: d.id.clone(), lat: d.lat, lon: d.lon, alt: d.alt, clock: d.clock }
-    }
-}
-
-impl From<ReceiverMsg> for ReceiverDecl {
-    fn from(m: ReceiverMsg) -> Self {
-        ReceiverDecl { id: m.id, lat: m.lat, lon: m.lon, alt: m.alt, clock: m.clock }
-    }
-}
 
 /// One frame batch for the processing thread.
 struct Batch {
     p: u32,
+    /// Its stream sequence (0 when the message does not say).
+    seq: u64,
     t: f64,
     receivers: usize,
     end: bool,
@@ -111,14 +89,15 @@ impl std::fmt::Display for WorkerStats {
         write!(
             f,
             "worker: batches={} frames={} bad_batches={} sync_updates={} sync_notes={} partitions_taken={} \
-             receiver_records_dropped={}",
+             receiver_records_dropped={} redelivered={}",
             self.batches,
             self.frames,
             self.bad_batches,
             self.sync_updates,
             self.sync_notes,
             self.partitions_taken,
-            self.receiver_records
+            self.receiver_records,
+            self.redelivered
         )
     }
 }
@@ -199,12 +178,11 @@ impl Processor {
             }
             ToCore::Batch(b) => {
                 if let Some(part) = self.parts.get_mut(&b.p) {
-                    let seq = b.msg.info().map_or(0, |i| i.stream_sequence);
-                    if seq != 0 && seq <= part.last_seq {
+                    if b.seq != 0 && b.seq <= part.last_seq {
                         self.stats.redelivered += 1;
                         return;
                     }
-                    part.last_seq = seq;
+                    part.last_seq = b.seq;
                     part.queue.push_back(*b);
                 }
             }
@@ -280,7 +258,6 @@ impl Processor {
         self.stats.sync_updates += updates - part.updates_seen;
         part.updates_seen = updates;
         let sync = wire::encode(&SyncBatch { partition: p, watermark: b.t, notes });
-        let seq = b.msg.info().map(|i| i.stream_sequence).unwrap_or(0);
         // Stored before the batch is acknowledged (one task stores both, in
         // order), and whenever a track was numbered: a worker taking the
         // partition over knows every number given before its floor.
@@ -293,8 +270,16 @@ impl Processor {
             let _ = self.out.send(FromCore::Checkpoint { p, bytes });
         }
         let frames = self.stats.frames - frames_before;
-        let done =
-            FromCore::Done { p, seq, t: b.t, end: b.end, frames, events: text, sync, msg: Box::new(b.msg) };
+        let done = FromCore::Done {
+            p,
+            seq: b.seq,
+            t: b.t,
+            end: b.end,
+            frames,
+            events: text,
+            sync,
+            msg: Box::new(b.msg),
+        };
         let _ = self.out.send(done);
         *self.shown.lock().expect("stats lock") = self.stats;
     }
@@ -380,25 +365,10 @@ async fn watch_clock(nats: Arc<Nats>, to_core: mpsc::Sender<ToCore>) -> Result<(
 
 /// Every receiver declared, in order, from the first.
 async fn follow_receivers(nats: Arc<Nats>, to_core: mpsc::Sender<ToCore>) -> Result<()> {
-    let consumer = nats
-        .receivers
-        .create_consumer(async_nats::jetstream::consumer::pull::OrderedConfig {
-            deliver_policy: DeliverPolicy::All,
-            ..Default::default()
-        })
-        .await
-        .context("cannot read the receiver stream")?;
-    let mut msgs = consumer.messages().await?;
-    while let Some(m) = msgs.next().await {
-        let m = m.context("receiver stream")?;
-        match serde_json::from_slice::<ReceiverMsg>(&m.payload) {
-            Ok(r) => {
-                if to_core.send(ToCore::Receiver(r.into())).is_err() {
-                    break;
-                }
-            }
-            // Indices are positions on this stream: one skipped would shift every later one.
-            Err(e) => anyhow::bail!("receiver declaration unreadable: {e}"),
+    let mut declared = nats.receiver_declarations().await?;
+    while let Some(d) = declared.next().await {
+        if to_core.send(ToCore::Receiver(d?)).is_err() {
+            break;
         }
     }
     Ok(())
@@ -447,19 +417,13 @@ async fn store_results(
         let Some(r) = r else { break };
         match r {
             FromCore::Done { p, seq, t, end, frames, events, sync, msg } => {
-                let mut h = HeaderMap::new();
-                h.insert(header::TIME, t.to_string().as_str());
-                h.insert(header::FRAMES, frames.to_string().as_str());
-                h.insert("Nats-Msg-Id", format!("e{p}-{seq}").as_str());
-                if end {
-                    h.insert(header::END, "1");
-                }
+                let h = headers(
+                    &format!("e{p}-{seq}"),
+                    end,
+                    &[(header::TIME, t), (header::FRAMES, frames as f64)],
+                );
                 let events = nats.js.publish_with_headers(nats.names.events(p), h, events.into()).await?;
-                let mut h = HeaderMap::new();
-                h.insert("Nats-Msg-Id", format!("s{p}-{seq}").as_str());
-                if end {
-                    h.insert(header::END, "1");
-                }
+                let h = headers(&format!("s{p}-{seq}"), end, &[]);
                 let sync = nats.js.publish_with_headers(nats.names.sync(p), h, sync.into()).await?;
                 pending.push_back(Storing { events, sync, msg });
                 if pending.len() >= IN_FLIGHT {
@@ -607,7 +571,7 @@ async fn consume(
                 let m = m.map_err(|e| anyhow::anyhow!("partition {p}: {e}"))?;
                 let t = super::header_f64(&m.message, header::TIME).unwrap_or(f64::NAN);
                 let receivers = super::header_f64(&m.message, header::RECEIVERS).unwrap_or(0.0) as usize;
-                let end = m.headers.as_ref().is_some_and(|h| h.get(header::END).is_some());
+                let end = super::is_end(&m.message);
                 if !t.is_finite() {
                     tracing::warn!(partition = p, "frame batch without its time: skipped");
                     m.ack().await.map_err(|e| anyhow::anyhow!("ack: {e}"))?;
@@ -616,7 +580,8 @@ async fn consume(
                     }
                     continue;
                 }
-                if to_core.send(ToCore::Batch(Box::new(Batch { p, t, receivers, end, msg: m }))).is_err() {
+                let seq = m.info().map_or(0, |i| i.stream_sequence);
+                if to_core.send(ToCore::Batch(Box::new(Batch { p, seq, t, receivers, end, msg: m }))).is_err() {
                     return Ok(());
                 }
             }

@@ -101,8 +101,8 @@ impl std::str::FromStr for ClockKind {
     }
 }
 
-/// A `receiver` line.
-#[derive(Clone, Debug, PartialEq)]
+/// A `receiver` line (also a cluster's receiver declaration, as JSON).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ReceiverDecl {
     pub id: String,
     pub lat: f64,

@@ -90,6 +90,40 @@ pub struct Kinematics {
     pub alt_ft: f64,
 }
 
+/// An airborne track's latest state, as conflict prediction reads it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Seen {
+    pub addr: u32,
+    /// When the state holds (s).
+    pub t: f64,
+    pub lat: f64,
+    pub lon: f64,
+    /// Height above the ellipsoid (m).
+    pub alt_m: f64,
+    pub vel_enu: [f64; 3],
+    /// Altitude for the sensitivity level (ft).
+    pub alt_ft: f64,
+}
+
+/// The tracks moved to `now` along their velocities, in a plane at the
+/// first one in address order: the frame's origin (and so every figure)
+/// must not depend on a hash map's order, or runs would differ.
+pub fn kinematics_at(now: f64, mut seen: Vec<Seen>) -> Vec<Kinematics> {
+    seen.sort_unstable_by_key(|s| s.addr);
+    let Some(first) = seen.first() else {
+        return Vec::new();
+    };
+    let origin = crate::track::plane::Plane::new(first.lat, first.lon, 0.0);
+    seen.iter()
+        .map(|s| {
+            let en = origin.to_en(s.lat, s.lon);
+            let (v, dt) = (s.vel_enu, (now - s.t).max(0.0));
+            let pos = [en[0] + v[0] * dt, en[1] + v[1] * dt, s.alt_m + v[2] * dt];
+            Kinematics { addr: s.addr, pos, vel: v, alt_ft: s.alt_ft }
+        })
+        .collect()
+}
+
 /// A predicted conflict.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Conflict {

@@ -586,13 +586,10 @@ impl Fuser {
     }
 
     /// What conflict prediction looks at: each airborne confirmed track's
-    /// latest mean (no covariance: this scans thousands of tracks each time),
-    /// moved to now along its velocity, in a plane at the first one, in
-    /// address order: the frame's origin (and so every figure) must not
-    /// depend on the hash map's order, or runs would differ.
+    /// latest mean (no covariance: this scans thousands of tracks each
+    /// time), moved to now along its velocity ([`conflict::kinematics_at`]).
     fn conflict_kinematics(&self, now: f64) -> Vec<conflict::Kinematics> {
-        let mut seen: Vec<(u32, f64, f64, crate::track::track::Kinematics)> =
-            Vec::with_capacity(self.aircraft.len());
+        let mut seen: Vec<conflict::Seen> = Vec::with_capacity(self.aircraft.len());
         for (&addr, a) in &self.aircraft {
             // Airborne traffic only: surface movements are not TCAS encounters.
             if a.fused.stage != Stage::Confirmed
@@ -604,30 +601,24 @@ impl Fuser {
             let Some(k) = a.fused.kinematics() else {
                 continue;
             };
-            let Some(alt) = k.alt_m else {
+            let Some(alt_m) = k.alt_m else {
                 continue;
             };
             if k.vel_enu[0].hypot(k.vel_enu[1]) < MIN_CONFLICT_SPEED_MPS {
                 continue;
             }
-            let alt_ft = a.alt_baro_ft.map_or(alt / crate::geo::FT_TO_M, f64::from);
-            seen.push((addr, alt, alt_ft, k));
+            let alt_ft = a.alt_baro_ft.map_or(alt_m / crate::geo::FT_TO_M, f64::from);
+            seen.push(conflict::Seen {
+                addr,
+                t: k.t,
+                lat: k.lat,
+                lon: k.lon,
+                alt_m,
+                vel_enu: k.vel_enu,
+                alt_ft,
+            });
         }
-        seen.sort_unstable_by_key(|s| s.0);
-        match seen.first() {
-            None => Vec::new(),
-            Some(first) => {
-                let origin = Plane::new(first.3.lat, first.3.lon, 0.0);
-                seen.iter()
-                    .map(|&(addr, alt, alt_ft, k)| {
-                        let en = origin.to_en(k.lat, k.lon);
-                        let (v, dt) = (k.vel_enu, (now - k.t).max(0.0));
-                        let pos = [en[0] + v[0] * dt, en[1] + v[1] * dt, alt + v[2] * dt];
-                        conflict::Kinematics { addr, pos, vel: v, alt_ft }
-                    })
-                    .collect()
-            }
-        }
+        conflict::kinematics_at(now, seen)
     }
 
     /// Moves time to `now`: measurements whose wait is over are applied and
