@@ -472,6 +472,51 @@ fn self_survey_puts_the_misplaced_receiver_where_it_is_and_learning_nears_the_or
     assert!(known < surveyed, "{surveyed:.1} m surveyed, {known:.1} m oracle");
 }
 
+/// An operator who calibrated every receiver but one (network-rough's
+/// oracle configuration without n01's timing): the given offsets are
+/// absolute, so n01's is learnt against them, its 250 ns GPS bias found,
+/// and its fixes as good as the oracle's. (Learnt as if only differences
+/// mattered, its offset stayed where it started, and the fixes it was in
+/// carried its whole bias.)
+#[test]
+fn a_receiver_whose_timing_is_not_given_learns_it_against_those_given() {
+    let s = Scenario::load(&root().join("fixtures/scenarios/network-rough.toml")).unwrap();
+    let (capture, truth_bytes) = sim(&s);
+    let truth = Truth::read(&truth_bytes[..]).unwrap();
+    let oracle = fuse1090::config::Config::parse(&fuse1090::sim::oracle_config(&s), "oracle").unwrap();
+    let known = |all: bool| -> Vec<_> {
+        (oracle.receiver.iter())
+            .map(|r| r.known())
+            .map(|mut k| {
+                if !all && k.decl.id == "n01" {
+                    k.timing = None;
+                }
+                k
+            })
+            .collect()
+    };
+    let (core, events, rxs) = run_core_knowing(&capture, &CoreConfig::default(), known(false));
+    assert_eq!(rxs[0].id, "n01");
+    let (t, m) = (&truth.receivers[0], core.mlat().timing(0));
+    let (offset_ns, sigma_ns) = (m.offset() * 1e9, m.sigma() * 1e9);
+    let (one_learnt, all_given) = (
+        fix_median_error(&events, &truth),
+        fix_median_error(&run_core_knowing(&capture, &CoreConfig::default(), known(true)).1, &truth),
+    );
+    eprintln!(
+        "n01 learnt {offset_ns:+.0} ns / {sigma_ns:.0} ns (true {:+.0} / {:.0}); fixes' median {one_learnt:.1} m, {all_given:.1} m all given",
+        t.offset_ns,
+        t.timing_sigma_ns()
+    );
+    assert!(
+        (offset_ns - t.offset_ns).abs() < 15.0,
+        "n01 offset {offset_ns:+.0} ns, true {:+.0}",
+        t.offset_ns
+    );
+    assert!((sigma_ns / t.timing_sigma_ns() - 1.0).abs() < 0.25, "n01 sigma {sigma_ns:.0} ns");
+    assert!(one_learnt < 1.1 * all_given, "{one_learnt:.1} m against {all_given:.1} m");
+}
+
 /// A counter-timed receiver declared 300 m off (tma-busy's rx05), with
 /// `self_survey`: used where the traffic says it is, its learnt sigma that
 /// of an honest counter, and the fixes' median error below that of the

@@ -56,8 +56,9 @@ pub enum SyncNote {
     ResetReceiver { now: f64, rx: u32 },
     /// A receiver's position in use changed: its pairs start again.
     ResetPairs { now: f64, rx: u32 },
-    /// A fix's lessons for its receivers' timing models.
-    Timing { now: f64, residuals: Vec<Residual> },
+    /// A fix's lessons for its receivers' timing models; `anchored` when
+    /// the fix had a receiver whose timing the configuration gives.
+    Timing { now: f64, residuals: Vec<Residual>, anchored: bool },
 }
 
 impl SyncNote {
@@ -130,11 +131,11 @@ impl SharedClock {
                 self.sync.note_reference(&local, *addr);
                 Applied::Applied
             }
-            SyncNote::Timing { residuals, .. } => {
+            SyncNote::Timing { residuals, anchored, .. } => {
                 if residuals.iter().any(|r| r.rx() >= n) {
                     return Applied::UnknownReceiver;
                 }
-                for rx in learn_residuals(residuals, &mut self.timing) {
+                for rx in learn_residuals(residuals, *anchored, &mut self.timing) {
                     self.sync.set_gps_bias(rx, self.timing[rx].offset());
                 }
                 Applied::Applied

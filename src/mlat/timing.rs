@@ -439,14 +439,26 @@ impl TimingModels for Vec<TimingModel> {
 }
 
 /// One fix's lessons being taught, one receiver at a time (in the order
-/// the fix judged them), and the common step taken back at the end.
+/// the fix judged them), and the common step taken back at the end unless
+/// the fix was anchored.
 #[derive(Default)]
 pub struct Lessons {
     sum: f64,
     moved: smallvec::SmallVec<[usize; 16]>,
+    anchored: bool,
 }
 
 impl Lessons {
+    /// Lessons of a fix that had a receiver whose timing is given (the
+    /// configuration's `[receiver.timing]`): its offset is the time scale,
+    /// so the learning receivers' offsets are measured against it and their
+    /// common step is kept. (Taken back, a lone learning receiver among
+    /// given ones could never move, and several kept whatever common error
+    /// they started with, against the given ones' absolute offsets.)
+    pub fn anchored() -> Lessons {
+        Lessons { anchored: true, ..Lessons::default() }
+    }
+
     #[inline]
     pub fn teach(&mut self, r: &Residual, models: &mut impl TimingModels) {
         let m = models.model(r.rx());
@@ -459,11 +471,12 @@ impl Lessons {
     }
 
     /// Only differences of offsets are observed (a common offset is the
-    /// emission time's): the lessons' common step is taken back, or it
-    /// would wander. Returns the receivers whose offsets moved.
+    /// emission time's): without an anchor the lessons' common step is
+    /// taken back, or it would wander. Returns the receivers whose offsets
+    /// moved.
     #[inline]
     pub fn finish(self, models: &mut impl TimingModels) -> smallvec::SmallVec<[usize; 16]> {
-        if !self.moved.is_empty() {
+        if !self.moved.is_empty() && !self.anchored {
             let common = self.sum / self.moved.len() as f64;
             for &rx in &self.moved {
                 models.model(rx).shift(-common);
@@ -474,8 +487,12 @@ impl Lessons {
 }
 
 /// Teaches one fix's residuals to the models ([`Lessons`]).
-pub fn learn_residuals(res: &[Residual], models: &mut impl TimingModels) -> smallvec::SmallVec<[usize; 16]> {
-    let mut lessons = Lessons::default();
+pub fn learn_residuals(
+    res: &[Residual],
+    anchored: bool,
+    models: &mut impl TimingModels,
+) -> smallvec::SmallVec<[usize; 16]> {
+    let mut lessons = if anchored { Lessons::anchored() } else { Lessons::default() };
     for r in res {
         lessons.teach(r, models);
     }

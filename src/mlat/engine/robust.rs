@@ -169,7 +169,9 @@ impl Mlat {
         // In a cluster the lessons go to the clock service, which learns
         // once for every worker; here they are learnt as they come.
         let shared = self.shared.is_some();
-        let (mut res, mut lessons): (GroupVec<Residual>, Lessons) = Default::default();
+        let anchored = sites.iter().any(|site| site.iter().any(|&rx| self.rxs[rx].timing_known));
+        let mut res: GroupVec<Residual> = GroupVec::new();
+        let mut lessons = if anchored { Lessons::anchored() } else { Lessons::default() };
         for (k, (site, &var)) in sites.iter().zip(sync_vars).enumerate() {
             let (r, h) = judged.at.residual(k);
             // A merged site's residual is no single receiver's (nor verdict).
@@ -206,7 +208,7 @@ impl Mlat {
         }
         if shared {
             if !res.is_empty() {
-                self.note_timing(now, &res);
+                self.note_timing(now, &res, anchored);
             }
             return;
         }

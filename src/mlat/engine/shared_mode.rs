@@ -67,7 +67,7 @@ impl Mlat {
     }
 
     /// A fix's lessons for the receivers' timing, for the clock service.
-    pub(super) fn note_timing(&mut self, now: f64, res: &[Residual]) {
-        self.note_sync(SyncNote::Timing { now, residuals: res.to_vec() });
+    pub(super) fn note_timing(&mut self, now: f64, res: &[Residual], anchored: bool) {
+        self.note_sync(SyncNote::Timing { now, residuals: res.to_vec(), anchored });
     }
 }
