@@ -52,7 +52,7 @@ pub use conformance::ConformanceConfig;
 use hold::{Waiting, MAX_WAITING};
 pub use methods::{Cross, Method};
 pub use monitor::ConflictMonitor;
-pub use records::{Alert, FuseStats, Output, Sources, SparseStats, TrackReport};
+pub use records::{Alert, FuseStats, Output, Sources, SparseStats, TrackReport, TrackSource};
 
 /// Slower tracks (taxiing, parked) are left out of conflict prediction (m/s).
 pub const MIN_CONFLICT_SPEED_MPS: f64 = 30.0;
@@ -668,11 +668,7 @@ impl Fuser {
         let window = self.cfg.sources_window_s;
         // Time since the source's newest position.
         let age = |s: Source| t - a.last_source_t[s as usize];
-        let sources = [Source::Adsb, Source::Mlat]
-            .into_iter()
-            .filter(|&s| age(s) <= window)
-            .map(Source::name)
-            .collect();
+        let sources = [Source::Adsb, Source::Mlat].into_iter().filter(|&s| age(s) <= window).collect();
         // A coasting single-source track (no position lately) is not fused.
         let coast = self.tcfg.coast_after_s;
         let confirmed = |s: Source| a.single[s as usize].stage == Stage::Confirmed;
@@ -718,7 +714,7 @@ impl Fuser {
                 }
             },
         };
-        let report = |source: &'static str, est: Estimate, sources: Sources| TrackReport {
+        let report = |source: TrackSource, est: Estimate, sources: Sources| TrackReport {
             id: a.id,
             addr,
             source,
@@ -736,13 +732,13 @@ impl Fuser {
             ages_s: [Source::Adsb, Source::Mlat].map(|s| Some(age(s).max(0.0)).filter(|age| *age <= window)),
         };
         if let Some(est) = fused {
-            out.push(Output::Track(Box::new(report("fused", est, sources))));
+            out.push(Output::Track(Box::new(report(TrackSource::Fused, est, sources))));
             self.stats.published += 1;
         }
         if self.publish_source_tracks {
             for (s, est) in [(Source::Adsb, adsb), (Source::Mlat, mlat)] {
                 if let Some(est) = est {
-                    out.push(Output::Track(Box::new(report(s.name(), est, smallvec::smallvec![s.name()]))));
+                    out.push(Output::Track(Box::new(report(s.into(), est, smallvec::smallvec![s]))));
                 }
             }
         }

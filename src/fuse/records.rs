@@ -3,6 +3,7 @@
 
 use std::sync::Arc;
 
+use crate::track::measurement::Source;
 use crate::track::motion::Motion;
 use crate::track::Estimate;
 
@@ -22,16 +23,44 @@ pub enum Alert {
     Conflict { t: f64, pair: [(u32, u64); 2], active: bool, tau_s: f64, t_cpa_s: f64, miss_m: f64, dz_m: f64 },
 }
 
-/// The sources that fed a track lately, by name; inline (a heap list per
-/// published track was measurable).
-pub type Sources = smallvec::SmallVec<[&'static str; 2]>;
+/// The sources that fed a track lately; inline (a heap list per published
+/// track was measurable).
+pub type Sources = smallvec::SmallVec<[Source; 2]>;
+
+/// Which track a report is of: the fused one, or one source's alone
+/// (`--source-tracks`). The track stream's `source`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum TrackSource {
+    Fused,
+    Adsb,
+    Mlat,
+}
+
+impl TrackSource {
+    pub fn name(self) -> &'static str {
+        match self {
+            TrackSource::Fused => "fused",
+            TrackSource::Adsb => "adsb",
+            TrackSource::Mlat => "mlat",
+        }
+    }
+}
+
+impl From<Source> for TrackSource {
+    fn from(s: Source) -> Self {
+        match s {
+            Source::Adsb => TrackSource::Adsb,
+            Source::Mlat => TrackSource::Mlat,
+        }
+    }
+}
 
 /// A published track state (contract `type: "track"`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct TrackReport {
     pub id: u64,
     pub addr: u32,
-    pub source: &'static str,
+    pub source: TrackSource,
     pub est: Estimate,
     pub alt_baro_ft: Option<i32>,
     pub sources: Sources,

@@ -4,7 +4,9 @@
 //! the cloud has one mode and is tight enough to say where the aircraft is.
 
 use super::{Fuser, Output, TrackReport};
+use crate::fuse::TrackSource;
 use crate::mlat::engine::TdoaGroup;
+use crate::track::measurement::Source;
 use crate::track::motion::Motion;
 use crate::track::particle::{SparseOutcome, SparseTrack};
 use crate::track::Estimate;
@@ -66,10 +68,10 @@ impl Fuser {
         out.push(Output::Track(Box::new(TrackReport {
             id: a.id,
             addr: g.addr,
-            source: "fused",
+            source: TrackSource::Fused,
             est: Estimate::new(s.t, plane, gauss, Some(h), 0.0),
             alt_baro_ft: a.alt_baro_ft,
-            sources: ["mlat"].into_iter().collect(),
+            sources: smallvec::smallvec![Source::Mlat],
             nac_p: None,
             period_s: period,
             motion: Motion::Unknown,

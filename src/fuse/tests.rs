@@ -158,7 +158,7 @@ fn multilaterated(mlat_only: bool, seed: u64, adsb_first: bool, suspect: bool) -
     f.finish(&mut out);
     out.into_iter()
         .filter_map(|o| match o {
-            Output::Track(r) if r.source == "fused" => Some(*r),
+            Output::Track(r) if r.source == TrackSource::Fused => Some(*r),
             _ => None,
         })
         .collect()
@@ -217,9 +217,10 @@ fn a_pair_too_far_apart_to_align_is_not_fused_and_is_counted() {
     // Fused and ADS-B records of the same publication, by track time.
     let pairs: Vec<(f64, &TrackReport, &TrackReport)> = published
         .iter()
-        .filter(|(_, r)| r.source == "fused")
+        .filter(|(_, r)| r.source == TrackSource::Fused)
         .filter_map(|(_, fused)| {
-            let adsb = published.iter().find(|(_, r)| r.source == "adsb" && r.est.t == fused.est.t)?;
+            let adsb =
+                published.iter().find(|(_, r)| r.source == TrackSource::Adsb && r.est.t == fused.est.t)?;
             Some((fused.est.t - last_fix, fused, &adsb.1))
         })
         .collect();
@@ -305,7 +306,7 @@ fn a_release_longer_than_the_reorder_window_still_publishes() {
         f.finish(&mut out);
         let published: Vec<(&str, f64)> = out
             .iter()
-            .filter_map(|o| if let Output::Track(r) = o { Some((r.source, r.est.t)) } else { None })
+            .filter_map(|o| if let Output::Track(r) = o { Some((r.source.name(), r.est.t)) } else { None })
             .collect();
         let expected =
             if source_tracks { vec![("fused", burst), ("mlat", burst)] } else { vec![("fused", burst)] };

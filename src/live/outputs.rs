@@ -23,6 +23,7 @@ use super::config::{OutputConfig, OutputFormat, OutputKind, ServiceConfig};
 use super::stream_out::Stream;
 use crate::core::Event;
 use crate::feed::RawFrame;
+use crate::fuse::TrackSource;
 use crate::publish::sbs::SbsWriter;
 use crate::publish::{asterix, beast, json, readout};
 
@@ -248,7 +249,7 @@ impl Outputs {
                     let records: Vec<Vec<u8>> = events
                         .iter()
                         .filter_map(|e| match e {
-                            Event::Track(r) if r.source == "fused" => {
+                            Event::Track(r) if r.source == TrackSource::Fused => {
                                 Some(asterix::record(self.source, r, r.ages_s))
                             }
                             _ => None,

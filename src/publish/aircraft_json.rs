@@ -21,9 +21,11 @@ use std::collections::HashMap;
 use serde::Serialize;
 
 use crate::core::Event;
+use crate::fuse::TrackSource;
 use crate::fuse::{Alert, TrackReport};
 use crate::publish::json::round;
 use crate::publish::readout::readout;
+use crate::track::measurement::Source;
 
 /// An aircraft leaves the view this long (s) after its fused track's last
 /// publication: a track that stopped being published has ended.
@@ -85,7 +87,7 @@ struct Aircraft<'a> {
 #[derive(Serialize)]
 struct Own<'a> {
     id: u64,
-    sources: &'a [&'static str],
+    sources: &'a [Source],
     /// Horizontal position covariance [[ee, en], [ne, nn]] (m²).
     cov_en: [[f64; 2]; 2],
     /// Radius holding the position with 95% probability (m), from `cov_en`.
@@ -118,7 +120,7 @@ impl AircraftView {
     pub fn observe(&mut self, events: &[Event], now: f64) {
         for ev in events {
             match ev {
-                Event::Track(r) if r.source == "fused" => self.track(r, now),
+                Event::Track(r) if r.source == TrackSource::Fused => self.track(r, now),
                 Event::Position(p) => {
                     if let Some(e) = self.aircraft.get_mut(&p.addr) {
                         e.surface = p.surface;
@@ -263,7 +265,7 @@ mod tests {
 
     use super::*;
     use crate::publish::readout::MAX_VEL_SIGMA_MS;
-    use crate::publish::test_report::{position, report};
+    use crate::publish::test_report::{position, report, Source};
 
     fn rendered(view: &AircraftView, now: f64) -> Value {
         serde_json::from_slice(&view.render(now, 42)).unwrap()
@@ -272,7 +274,10 @@ mod tests {
     #[test]
     fn readsb_names_carry_readsb_units() {
         let mut view = AircraftView::new();
-        view.observe(&[Event::Track(Box::new(report(0x3C6DD4, 100.0, &["adsb", "mlat"])))], 100.5);
+        view.observe(
+            &[Event::Track(Box::new(report(0x3C6DD4, 100.0, &[Source::Adsb, Source::Mlat])))],
+            100.5,
+        );
         let doc = rendered(&view, 101.0);
         assert_eq!(doc["now"], 101.0);
         assert_eq!(doc["messages"], 42);
@@ -300,7 +305,7 @@ mod tests {
 
     #[test]
     fn a_velocity_not_known_yet_is_left_out() {
-        let mut r = report(1, 10.0, &["adsb"]);
+        let mut r = report(1, 10.0, &[Source::Adsb]);
         r.est.state.p *= (MAX_VEL_SIGMA_MS + 0.1).powi(2);
         let mut view = AircraftView::new();
         view.observe(&[Event::Track(Box::new(r.clone()))], 10.0);
@@ -317,7 +322,7 @@ mod tests {
     #[test]
     fn multilateration_alone_is_said_field_by_field() {
         let mut view = AircraftView::new();
-        view.observe(&[Event::Track(Box::new(report(1, 10.0, &["mlat"])))], 10.0);
+        view.observe(&[Event::Track(Box::new(report(1, 10.0, &[Source::Mlat])))], 10.0);
         let a = &rendered(&view, 10.0)["aircraft"][0];
         assert_eq!(a["type"], "mlat");
         let fields: Vec<&str> = a["mlat"].as_array().unwrap().iter().map(|v| v.as_str().unwrap()).collect();
@@ -329,11 +334,11 @@ mod tests {
     #[test]
     fn single_source_tracks_are_not_shown_and_surface_aircraft_are_on_the_ground() {
         let mut view = AircraftView::new();
-        let mut adsb_only = report(2, 10.0, &["adsb"]);
-        adsb_only.source = "adsb";
+        let mut adsb_only = report(2, 10.0, &[Source::Adsb]);
+        adsb_only.source = TrackSource::Adsb;
         view.observe(&[Event::Track(Box::new(adsb_only))], 10.0);
         assert!(view.is_empty(), "the fused track is the aircraft's; per-source ones are not");
-        view.observe(&[Event::Track(Box::new(report(2, 10.0, &["adsb"])))], 10.0);
+        view.observe(&[Event::Track(Box::new(report(2, 10.0, &[Source::Adsb])))], 10.0);
         view.observe(&[Event::Position(position(2, 10.0, true))], 10.2);
         assert_eq!(rendered(&view, 10.5)["aircraft"][0]["alt_baro"], "ground");
     }
@@ -341,8 +346,8 @@ mod tests {
     #[test]
     fn conflicts_are_listed_while_active_and_aircraft_age_out() {
         let mut view = AircraftView::new();
-        view.observe(&[Event::Track(Box::new(report(1, 0.0, &["adsb"])))], 0.0);
-        view.observe(&[Event::Track(Box::new(report(2, 0.0, &["adsb"])))], 0.0);
+        view.observe(&[Event::Track(Box::new(report(1, 0.0, &[Source::Adsb])))], 0.0);
+        view.observe(&[Event::Track(Box::new(report(2, 0.0, &[Source::Adsb])))], 0.0);
         let conflict = |active| Alert::Conflict {
             t: 1.0,
             pair: [(1, 10), (2, 20)],
@@ -358,7 +363,7 @@ mod tests {
         assert_eq!(doc["aircraft"][1]["fuse1090"]["conflicts"], serde_json::json!(["000001"]));
         view.observe(&[Event::Alert(conflict(false))], 2.0);
         assert!(rendered(&view, 2.0)["aircraft"][0]["fuse1090"].get("conflicts").is_none());
-        view.observe(&[Event::Track(Box::new(report(2, 50.0, &["adsb"])))], 50.0);
+        view.observe(&[Event::Track(Box::new(report(2, 50.0, &[Source::Adsb])))], 50.0);
         view.expire(TRACK_TTL_S + 1.0);
         assert_eq!(view.len(), 1, "aircraft 1, not published for longer than the TTL, is gone");
     }
@@ -366,7 +371,7 @@ mod tests {
     #[test]
     fn reports_that_reach_no_track_do_not_keep_an_aircraft() {
         let mut view = AircraftView::new();
-        view.observe(&[Event::Track(Box::new(report(1, 0.0, &["adsb"])))], 0.0);
+        view.observe(&[Event::Track(Box::new(report(1, 0.0, &[Source::Adsb])))], 0.0);
         for t in 1..=70 {
             view.observe(&[Event::Position(position(1, t as f64, false))], t as f64);
         }
@@ -378,7 +383,7 @@ mod tests {
     fn the_view_is_bounded() {
         let mut view = AircraftView::new();
         for a in 0..MAX_AIRCRAFT as u32 + 10 {
-            view.observe(&[Event::Track(Box::new(report(a, a as f64, &["adsb"])))], a as f64);
+            view.observe(&[Event::Track(Box::new(report(a, a as f64, &[Source::Adsb])))], a as f64);
         }
         assert_eq!(view.len(), MAX_AIRCRAFT);
         let doc = rendered(&view, 1e6);

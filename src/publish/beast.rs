@@ -17,6 +17,7 @@
 use crate::feed::beast;
 use crate::feed::RawFrame;
 use crate::fuse::TrackReport;
+use crate::fuse::TrackSource;
 use crate::modes::{cpr, encode};
 use crate::publish::readout::Readout;
 
@@ -33,7 +34,7 @@ const TC_POSITION: u8 = 18;
 /// Appends the frames for one publication of a fused track, if it is one
 /// multilateration alone fed; `ro` is its [`readout`](super::readout).
 pub fn mlat_result(r: &TrackReport, ro: &Readout, out: &mut Vec<u8>) {
-    if ro.adsb || r.source != "fused" {
+    if ro.adsb || r.source != TrackSource::Fused {
         return;
     }
     let est = &r.est;
@@ -68,10 +69,10 @@ mod tests {
     use crate::feed::{FeedEvent, FrameParser};
     use crate::modes::{crc, velocity};
     use crate::publish::readout::readout;
-    use crate::publish::test_report::report;
+    use crate::publish::test_report::{report, Source};
 
     /// The frames sent for a report, parsed back from the Beast stream.
-    fn frames(sources: &[&'static str]) -> Vec<RawFrame> {
+    fn frames(sources: &[Source]) -> Vec<RawFrame> {
         let r = report(0x3C6DD4, 100.0, sources);
         let mut wire = Vec::new();
         mlat_result(&r, &readout(&r), &mut wire);
@@ -100,7 +101,7 @@ mod tests {
 
     #[test]
     fn an_mlat_only_track_becomes_position_velocity_and_identification_squitters() {
-        let sent = frames(&["mlat"]);
+        let sent = frames(&[Source::Mlat]);
         assert_eq!(sent.len(), 4, "even, odd, velocity, identification");
         for f in &sent {
             let b = f.bytes();
@@ -133,7 +134,7 @@ mod tests {
 
     #[test]
     fn aircraft_with_adsb_are_left_to_the_receiving_decoder() {
-        assert!(frames(&["adsb", "mlat"]).is_empty());
-        assert!(frames(&["adsb"]).is_empty());
+        assert!(frames(&[Source::Adsb, Source::Mlat]).is_empty());
+        assert!(frames(&[Source::Adsb]).is_empty());
     }
 }

@@ -261,8 +261,8 @@ fn track(out: &mut Vec<u8>, r: &TrackReport) {
     o.place(r.addr, e.t, e.lat, e.lon, e.alt_m, r.alt_baro_ft);
     o.floats("vel_enu", &e.vel_enu.map(|v| round(v, 1e3)));
     o.cov("cov_en", e.cov_en().map(|row| row.map(|v| round(v, 1e3))));
-    o.str("source", r.source);
-    o.strs("sources", r.sources.iter().copied());
+    o.str("source", r.source.name());
+    o.strs("sources", r.sources.iter().map(|s| s.name()));
     if let Some(n) = r.nac_p {
         o.int("nac_p", n);
     }
@@ -313,7 +313,9 @@ mod tests {
 
     use super::*;
     use crate::core::Dating;
+    use crate::fuse::TrackSource;
     use crate::track::kf::Gaussian;
+    use crate::track::measurement::Source;
     use crate::track::motion::Motion;
     use crate::track::plane::Plane;
     use crate::track::Estimate;
@@ -327,6 +329,7 @@ mod tests {
         use crate::core::PositionReport;
         use crate::fuse::TrackReport;
         use crate::mlat::MlatFix;
+        use crate::track::measurement::Source;
 
         #[derive(Serialize)]
         struct Mlat<'a> {
@@ -381,7 +384,7 @@ mod tests {
             vel_enu: [f64; 3],
             cov_en: [[f64; 2]; 2],
             source: &'static str,
-            sources: &'a [&'static str],
+            sources: &'a [Source],
             #[serde(skip_serializing_if = "Option::is_none")]
             nac_p: Option<u8>,
             period_s: f64,
@@ -445,7 +448,7 @@ mod tests {
                 alt_baro_ft: r.alt_baro_ft,
                 vel_enu: e.vel_enu.map(|v| round(v, 1e3)),
                 cov_en: e.cov_en().map(|row| row.map(|v| round(v, 1e3))),
-                source: r.source,
+                source: r.source.name(),
                 sources: &r.sources,
                 nac_p: r.nac_p,
                 period_s: r.period_s,
@@ -548,14 +551,15 @@ mod tests {
                 plane,
                 state: Gaussian { x: Default::default(), p: Default::default() },
             };
-            const SOURCES: [&str; 3] = ["adsb", "mlat", "fused"];
+            const SOURCES: [TrackSource; 3] = [TrackSource::Adsb, TrackSource::Mlat, TrackSource::Fused];
+            const FEEDS: [Source; 2] = [Source::Adsb, Source::Mlat];
             let r = TrackReport {
                 id: rng.gen(),
                 addr: rng.gen(),
                 source: SOURCES[rng.gen_range(0..3)],
                 est,
                 alt_baro_ft: maybe(&mut rng, |r| r.gen()),
-                sources: (0..rng.gen_range(0..3)).map(|_| SOURCES[rng.gen_range(0..3)]).collect(),
+                sources: (0..rng.gen_range(0..3)).map(|_| FEEDS[rng.gen_range(0..2)]).collect(),
                 nac_p: maybe(&mut rng, |r| r.gen()),
                 period_s: number(&mut rng),
                 motion: [Motion::Unknown, Motion::Static, Motion::Moving][rng.gen_range(0..3)],

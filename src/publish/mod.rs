@@ -18,17 +18,18 @@ pub(crate) mod test_report {
 
     use crate::fuse::{Sources, TrackReport};
     use crate::track::kf::Gaussian;
+    pub use crate::track::measurement::Source;
     use crate::track::motion::Motion;
     use crate::track::plane::Plane;
     use crate::track::Estimate;
 
     /// Track 7 of `addr` at `t` from `sources`: at 43.5 N 1.25 E, 1000 m,
     /// north-east at 100 m/s and climbing 5 m/s, its velocity known to 1 m/s.
-    pub fn report(addr: u32, t: f64, sources: &[&'static str]) -> TrackReport {
+    pub fn report(addr: u32, t: f64, sources: &[Source]) -> TrackReport {
         TrackReport {
             id: 7,
             addr,
-            source: "fused",
+            source: crate::fuse::TrackSource::Fused,
             est: Estimate {
                 t,
                 lat: 43.5,

@@ -7,6 +7,7 @@
 //! speed is a measurement, and a track just started has only a guess.
 
 use crate::fuse::TrackReport;
+use crate::track::measurement::Source;
 
 pub const M_TO_FT: f64 = 1.0 / 0.3048;
 pub const MS_TO_KT: f64 = 3600.0 / 1852.0;
@@ -55,6 +56,6 @@ pub fn readout(r: &TrackReport) -> Readout {
             .then(|| ve.atan2(vn).to_degrees().rem_euclid(360.0)),
         geom_rate_fpm: est.alt_m.map(|_| (vu * M_TO_FT * 60.0).round() as i64),
         vel_sigma_ms: vel_sigma,
-        adsb: r.sources.contains(&"adsb"),
+        adsb: r.sources.contains(&Source::Adsb),
     }
 }

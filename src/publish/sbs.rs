@@ -27,6 +27,7 @@ use std::fmt::Write;
 
 use crate::core::Event;
 use crate::fuse::TrackReport;
+use crate::fuse::TrackSource;
 use crate::publish::readout::readout;
 
 /// Callsign and squawk lines are repeated this often (s) when unchanged.
@@ -70,7 +71,7 @@ impl SbsWriter {
                             .insert(p.addr, Seen { surface: Some(p.surface), last: now, ..Seen::default() });
                     }
                 }
-                Event::Track(r) if r.source == "fused" => self.track(r, now, out),
+                Event::Track(r) if r.source == TrackSource::Fused => self.track(r, now, out),
                 _ => {}
             }
         }
@@ -192,7 +193,7 @@ fn civil_from_days(z: i64) -> (i64, u32, u32) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::publish::test_report::{position, report};
+    use crate::publish::test_report::{position, report, Source};
 
     #[test]
     fn times_are_utc_dates_and_milliseconds() {
@@ -230,7 +231,7 @@ mod tests {
     #[test]
     fn an_airborne_track_is_position_velocity_callsign_and_squawk() {
         let mut w = SbsWriter::new();
-        let r = report(0x3C6DD4, 1_700_000_000.0, &["adsb"]);
+        let r = report(0x3C6DD4, 1_700_000_000.0, &[Source::Adsb]);
         let got = lines(&mut w, &[Event::Track(Box::new(r.clone()))], 1_700_000_000.25);
         let kinds: Vec<&str> = got.iter().map(|f| f[1].as_str()).collect();
         assert_eq!(kinds, ["3", "4", "1", "6"]);
@@ -254,11 +255,11 @@ mod tests {
     fn a_surface_aircraft_gets_msg2_and_an_mlat_one_its_replies_altitude() {
         let mut w = SbsWriter::new();
         let position = position(1, 10.0, true);
-        let events = [Event::Position(position), Event::Track(Box::new(report(1, 10.0, &["adsb"])))];
+        let events = [Event::Position(position), Event::Track(Box::new(report(1, 10.0, &[Source::Adsb])))];
         let got = lines(&mut w, &events, 10.0);
         assert_eq!(got[0][1], "2");
         assert_eq!((got[0][11].as_str(), got[0][12].as_str(), got[0][21].as_str()), ("", "194", "-1"));
-        let got = lines(&mut w, &[Event::Track(Box::new(report(2, 10.0, &["mlat"])))], 10.0);
+        let got = lines(&mut w, &[Event::Track(Box::new(report(2, 10.0, &[Source::Mlat])))], 10.0);
         let msg5 = got.iter().find(|f| f[1] == "5").expect("MSG,5");
         assert_eq!((msg5[10].as_str(), msg5[11].as_str()), ("AFR12   ", "3200"));
     }

@@ -5,7 +5,8 @@
 use nalgebra::{Matrix2, Vector2};
 
 /// Who measured.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Source {
     Adsb = 0,
     Mlat = 1,
