@@ -108,14 +108,25 @@ fn config(dir: &Path, name: &str, port: u16, role: &str) -> PathBuf {
     path
 }
 
-/// The clock, `workers` workers and the publisher (writing `output`) of
-/// cluster `name`, once the workers have registered and shared the partitions.
-fn start_roles(dir: &Path, name: &str, port: u16, workers: usize, output: &Path) -> (Proc, Vec<Proc>, Proc) {
+/// The clock, `workers` workers and the publisher (writing `output`, its
+/// configuration ending with `publisher_extra`) of cluster `name`, once the
+/// workers have registered and shared the partitions.
+fn start_roles(
+    dir: &Path,
+    name: &str,
+    port: u16,
+    workers: usize,
+    output: &Path,
+    publisher_extra: &str,
+) -> (Proc, Vec<Proc>, Proc) {
     let clock = spawn(&[], &config(dir, name, port, "clock"));
     // One file for them all: written again while one of them read it, it was once read empty.
     let worker_config = config(dir, name, port, "worker");
     let workers = (0..workers).map(|_| spawn(&[], &worker_config)).collect();
-    let publisher = spawn(&["--output", output.to_str().unwrap()], &config(dir, name, port, "publisher"));
+    let publisher_config = config(dir, name, port, "publisher");
+    let text = std::fs::read_to_string(&publisher_config).unwrap() + publisher_extra;
+    std::fs::write(&publisher_config, text).unwrap();
+    let publisher = spawn(&["--output", output.to_str().unwrap()], &publisher_config);
     std::thread::sleep(Duration::from_millis(2500));
     (clock, workers, publisher)
 }
@@ -169,7 +180,7 @@ fn run_cluster(
     garbage: bool,
 ) -> ClusterRun {
     let output = dir.join(format!("{name}.jsonl"));
-    let (clock, workers, mut publisher) = start_roles(dir, name, port, 3, &output);
+    let (clock, workers, mut publisher) = start_roles(dir, name, port, 3, &output, "");
     if garbage {
         // A stranger's messages on the subjects: skipped and counted, nothing else.
         publish_garbage(
@@ -394,7 +405,10 @@ fn a_cluster_of_processes_tracks_as_one_node_does_and_survives_a_killed_worker()
 /// The ingest as a live service: the demo's eight receivers replayed into its
 /// Beast TCP server over loopback sockets, their frames put on the cluster,
 /// two workers, a clock and a publisher: the surface world's aircraft all
-/// tracked and multilaterated about as well as one node does offline.
+/// tracked and multilaterated about as well as one node does offline. The
+/// publisher serves what a single node serves: JSON and ASTERIX CAT062 over
+/// UDP (every record of the track stream, every fused track), and the map's
+/// `aircraft.json` over HTTP.
 #[test]
 fn a_live_ingest_puts_its_receivers_frames_on_the_cluster() {
     let Some(server) = nats_server() else { return };
@@ -415,7 +429,15 @@ fn a_live_ingest_puts_its_receivers_frames_on_the_cluster() {
     let (nats, port) = start_nats(&server, dir);
     let name = "live";
     let output = dir.join("live.jsonl");
-    let (clock, workers, publisher) = start_roles(dir, name, port, 2, &output);
+    let (json_rx, asterix_rx) = (Datagrams::listen(), Datagrams::listen());
+    let http_port = common::free_port();
+    let served = format!(
+        "[http]\nlisten = \"127.0.0.1:{http_port}\"\n\
+         [[output]]\nkind = \"udp\"\nformat = \"json\"\naddress = \"{}\"\n\
+         [[output]]\nkind = \"udp\"\nformat = \"asterix062\"\naddress = \"{}\"\n",
+        json_rx.addr, asterix_rx.addr
+    );
+    let (clock, workers, publisher) = start_roles(dir, name, port, 2, &output, &served);
     let ingest_config = dir.join("ingest.toml");
     let demo = common::live::demo(common::free_port(), 4.0, "kind = \"stdout\"\n");
     std::fs::write(&ingest_config, demo + "\n" + &cluster_table(name, port, "ingest")).unwrap();
@@ -438,7 +460,9 @@ fn a_live_ingest_puts_its_receivers_frames_on_the_cluster() {
     std::thread::sleep(Duration::from_secs(3));
     ingest.stop();
     std::thread::sleep(Duration::from_secs(2));
+    let aircraft = aircraft_json(http_port);
     publisher.stop();
+    let (json, asterix) = (json_rx.stop(), asterix_rx.stop());
     let printed: Vec<String> = workers.into_iter().map(Proc::stop).collect();
     clock.stop();
     // Replayed at 4x and stamped by the system clock, the live records are
@@ -456,7 +480,82 @@ fn a_live_ingest_puts_its_receivers_frames_on_the_cluster() {
     eprintln!("MLAT fix to the aircraft's ADS-B, median: live cluster {live_m:.1} m ({n_live} fixes), one node offline {one_m:.1} m ({n_one})");
     assert!(n_live as f64 >= 0.8 * n_one as f64, "{n_live} fixes against {n_one}");
     assert!(live_m <= 1.5 * one_m + 5.0, "fixes {live_m} m from the ADS-B, one node's {one_m} m");
+    // The UDP JSON output: the track stream but its ADS-B position records
+    // (as a single node's), datagram for datagram.
+    let written: Vec<String> = (std::fs::read_to_string(&output).unwrap().lines())
+        .filter(|l| !l.contains("\"type\":\"position\""))
+        .map(str::to_string)
+        .collect();
+    let sent: Vec<String> = json.iter().map(|d| String::from_utf8_lossy(d).to_string()).collect();
+    eprintln!(
+        "publisher: {} JSON datagrams for {} records, {} ASTERIX blocks",
+        sent.len(),
+        written.len(),
+        asterix.len()
+    );
+    assert_eq!(sent, written, "the UDP JSON output is the track stream");
+    // ASTERIX: one record per fused track publication, in CAT062 blocks.
+    let fused = written
+        .iter()
+        .filter(|l| l.contains("\"type\":\"track\"") && l.contains("\"source\":\"fused\""))
+        .count();
+    assert!(asterix
+        .iter()
+        .all(|b| b.first() == Some(&62) && u16::from_be_bytes([b[1], b[2]]) as usize == b.len()));
+    assert!(!asterix.is_empty() && fused > 0);
+    // The map's document: the aircraft tracked at the end, none that do not exist.
+    let listed: BTreeSet<String> = (aircraft["aircraft"].as_array().unwrap().iter())
+        .filter_map(|a| a["hex"].as_str().map(str::to_uppercase))
+        .collect();
+    eprintln!("aircraft.json at the end: {listed:?}");
+    assert!(!listed.is_empty() && listed.is_subset(&live_tracked), "{listed:?} against {live_tracked:?}");
     drop(nats);
+}
+
+/// Datagrams received on a loopback UDP socket, by a thread of their own.
+struct Datagrams {
+    addr: std::net::SocketAddr,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    thread: std::thread::JoinHandle<Vec<Vec<u8>>>,
+}
+
+impl Datagrams {
+    fn listen() -> Datagrams {
+        let socket = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        socket.set_read_timeout(Some(Duration::from_millis(100))).unwrap();
+        let addr = socket.local_addr().unwrap();
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let stopped = stop.clone();
+        let thread = std::thread::spawn(move || {
+            let (mut got, mut buf) = (Vec::new(), vec![0u8; 65_536]);
+            while !stopped.load(std::sync::atomic::Ordering::Relaxed) {
+                if let Ok(n) = socket.recv(&mut buf) {
+                    got.push(buf[..n].to_vec());
+                }
+            }
+            got
+        });
+        Datagrams { addr, stop, thread }
+    }
+
+    /// What arrived, once the sender has stopped.
+    fn stop(self) -> Vec<Vec<u8>> {
+        std::thread::sleep(Duration::from_millis(300));
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        self.thread.join().unwrap()
+    }
+}
+
+/// The publisher's `/data/aircraft.json`.
+fn aircraft_json(port: u16) -> serde_json::Value {
+    use std::io::{Read, Write};
+    let mut s = std::net::TcpStream::connect(("127.0.0.1", port)).expect("the publisher serves HTTP");
+    s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    s.write_all(b"GET /data/aircraft.json HTTP/1.0\r\nHost: x\r\n\r\n").unwrap();
+    let mut text = String::new();
+    let _ = s.read_to_string(&mut text);
+    let body = text.split_once("\r\n\r\n").map(|(_, b)| b).unwrap_or_default();
+    serde_json::from_str(body).unwrap_or_else(|e| panic!("aircraft.json: {e}: {text}"))
 }
 
 /// The addresses with a fused track.

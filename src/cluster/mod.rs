@@ -405,11 +405,16 @@ pub fn run(cfg: &Config, path: Option<&Path>, capture: Option<&Path>, output: Op
             tasks.spawn(async move { worker::run(nats, cluster, core, shown).await });
         }
         if cluster.has(Role::Publisher) {
-            let (nats, cluster, core) = (nats.clone(), cluster.clone(), cfg.core.clone());
+            // The metrics endpoint is a live ingest's when it shares the process.
+            let mut config = cfg.clone();
+            if cluster.has(Role::Ingest) && capture.is_none() {
+                config.service.metrics_listen = None;
+            }
+            let (nats, cluster) = (nats.clone(), cluster.clone());
             let output = output.map(Path::to_path_buf);
             until_done.push(
                 tasks
-                    .spawn(async move { publisher::run(&nats, &cluster, &core, output).await.map(|_| ()) })
+                    .spawn(async move { publisher::run(&nats, &cluster, &config, output).await.map(|_| ()) })
                     .id(),
             );
         }

@@ -10,15 +10,23 @@
 
 use std::io::Write;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 use anyhow::{Context, Result};
 use async_nats::jetstream::consumer::{pull, AckPolicy, DeliverPolicy};
 use futures_util::StreamExt;
 
-use super::{header, ClusterConfig, Mark, Nats, Watermarks};
+use super::{header, wire, ClusterConfig, Mark, Nats, Watermarks};
+use crate::config::Config;
 use crate::core::{CoreConfig, Event};
 use crate::fuse::conflict::{kinematics_at, Seen};
-use crate::fuse::{ConflictConfig, ConflictMonitor, Output, MIN_CONFLICT_SPEED_MPS};
+use crate::fuse::{
+    ConflictConfig, ConflictMonitor, Output, TrackReport, TrackSource, MIN_CONFLICT_SPEED_MPS,
+};
+use crate::live::outputs::Outputs;
+use crate::live::registry::Registry;
+use crate::live::stream_out;
+use crate::live::web::WebPublisher;
 use crate::publish::json::write_event;
 use crate::FastMap;
 
@@ -36,31 +44,20 @@ pub struct TrackView {
 }
 
 impl TrackView {
-    /// A fused track record's view (`None` for anything else, or a track without height or velocity).
-    pub fn parse(line: &[u8]) -> Option<(u32, TrackView)> {
-        // Most lines are not fused tracks: told apart without parsing them
-        // (the track stream writes these fields exactly so, docs/formats.md).
-        let has = |s: &[u8]| memchr::memmem::find(line, s).is_some();
-        if !has(b"\"type\":\"track\"") || !has(b"\"source\":\"fused\"") {
-            return None;
-        }
-        let v: serde_json::Value = serde_json::from_slice(line).ok()?;
-        if v["type"] != "track" || v["source"] != "fused" {
-            return None;
-        }
-        let f = |k: &str| v[k].as_f64();
-        let vel = v["vel_enu"].as_array()?;
-        let view = TrackView {
-            id: v["id"].as_u64()?,
-            t: f("t")?,
-            lat: f("lat")?,
-            lon: f("lon")?,
-            alt_m: f("alt_m")?,
-            vel_enu: [vel.first()?.as_f64()?, vel.get(1)?.as_f64()?, vel.get(2)?.as_f64()?],
-            alt_baro_ft: f("alt_baro_ft"),
-            period_s: f("period_s").unwrap_or(1.0),
-        };
-        Some((u32::from_str_radix(v["hex"].as_str()?, 16).ok()?, view))
+    /// A fused track's view (`None` for a single-source track, or one
+    /// without height).
+    pub fn of(r: &TrackReport) -> Option<TrackView> {
+        (r.source == TrackSource::Fused).then_some(())?;
+        Some(TrackView {
+            id: r.id,
+            t: r.est.t,
+            lat: r.est.lat,
+            lon: r.est.lon,
+            alt_m: r.est.alt_m?,
+            vel_enu: r.est.vel_enu,
+            alt_baro_ft: r.alt_baro_ft.map(f64::from),
+            period_s: r.period_s,
+        })
     }
 }
 
@@ -84,9 +81,11 @@ impl CrossPartition {
         }
     }
 
-    pub fn on_line(&mut self, line: &[u8]) {
-        if let Some((addr, view)) = TrackView::parse(line) {
-            self.tracks.insert(addr, view);
+    pub fn on_event(&mut self, ev: &Event) {
+        if let Event::Track(r) = ev {
+            if let Some(view) = TrackView::of(r) {
+                self.tracks.insert(r.addr, view);
+            }
         }
     }
 
@@ -124,26 +123,89 @@ pub struct PublisherStats {
     pub batches: u64,
     /// Frames the workers processed for the batches written (each batch once).
     pub frames: u64,
-    pub lines: u64,
+    /// Events written (alerts of the cross-partition stage included).
+    pub events: u64,
     pub replayed_batches: u64,
     pub bad_batches: u64,
+    /// Receivers named by an event before their declaration was read
+    /// (written as "?").
+    pub unknown_receivers: u64,
+}
+
+/// Where the events go: the `--output` file, the configuration's
+/// `[[output]]` destinations and the HTTP server's documents, as a single
+/// node has them.
+struct Sinks {
+    file: Box<dyn Write + Send>,
+    outputs: Outputs,
+    web: Option<WebPublisher>,
+    registry: Arc<Registry>,
+    messages: u64,
+    text: Vec<u8>,
+}
+
+impl Sinks {
+    async fn start(
+        config: &Config,
+        output: Option<PathBuf>,
+    ) -> Result<(Sinks, Vec<tokio::task::JoinHandle<()>>)> {
+        let file: Box<dyn Write + Send> = match &output {
+            Some(p) => Box::new(std::io::BufWriter::new(
+                std::fs::File::create(p).with_context(|| format!("cannot create {}", p.display()))?,
+            )),
+            None => Box::new(std::io::sink()),
+        };
+        let (streams, failed) = stream_out::start_all(&config.output, &[]).await;
+        if let Some((n, e)) = failed.into_iter().next() {
+            anyhow::bail!("[[output]] {n} cannot start: {e}");
+        }
+        let outputs = Outputs::new(&config.output, &config.service, &streams);
+        let registry = Arc::new(Registry::default());
+        let (tasks, web) = crate::live::start_http(config, &registry).await?;
+        let web = web.map(WebPublisher::new);
+        Ok((Sinks { file, outputs, web, registry, messages: 0, text: Vec::new() }, tasks))
+    }
+
+    /// One batch of events, at data time `now`; receivers named by `ids`.
+    fn send(&mut self, events: &[Event], ids: &[String], now: f64, stats: &mut PublisherStats) -> Result<()> {
+        let unknown = std::cell::Cell::new(0);
+        let name = |i: usize| {
+            ids.get(i).map(String::as_str).unwrap_or_else(|| {
+                unknown.set(unknown.get() + 1);
+                "?"
+            })
+        };
+        for ev in events {
+            self.text.clear();
+            write_event(&mut self.text, ev, name);
+            self.file.write_all(&self.text).context("writing output")?;
+        }
+        stats.events += events.len() as u64;
+        self.messages +=
+            events.iter().filter(|e| matches!(e, Event::Position(_) | Event::Mlat(_))).count() as u64;
+        self.outputs.publish(events, name, now);
+        if let Some(w) = &mut self.web {
+            w.observe(events, now);
+            w.maybe_render(now, self.messages, &self.registry);
+        }
+        stats.unknown_receivers += unknown.get();
+        Ok(())
+    }
 }
 
 pub async fn run(
     nats: &Nats,
     cfg: &ClusterConfig,
-    core: &CoreConfig,
+    config: &Config,
     output: Option<PathBuf>,
 ) -> Result<PublisherStats> {
-    let mut out: Box<dyn Write + Send> = match &output {
-        Some(p) => Box::new(std::io::BufWriter::new(
-            std::fs::File::create(p).with_context(|| format!("cannot create {}", p.display()))?,
-        )),
-        None => Box::new(std::io::sink()),
-    };
+    let (mut sinks, http_tasks) = Sinks::start(config, output).await?;
     let mut marks = Watermarks::new(cfg.partitions);
-    let mut cross = CrossPartition::new(core);
+    let mut cross = CrossPartition::new(&config.core);
     let mut stats = PublisherStats::default();
+    // The receivers, in declaration order, for the records that name them.
+    let mut declared = nats.receiver_declarations().await?;
+    let mut ids: Vec<String> = Vec::new();
     let name = format!("{}-publisher", cfg.name);
     let consumer = nats
         .events
@@ -159,14 +221,34 @@ pub async fn run(
         .await
         .context("cannot consume the events")?;
     let mut msgs = consumer.messages().await?;
-    let (mut alerts, mut text) = (Vec::new(), Vec::new());
-    while let Some(m) = msgs.next().await {
+    let mut alerts = Vec::new();
+    loop {
+        let m = tokio::select! {
+            // Declarations first: an event may name a receiver only just declared.
+            biased;
+            d = declared.next() => {
+                if let Some(d) = d {
+                    ids.push(d?.id);
+                }
+                continue;
+            }
+            m = msgs.next() => m,
+        };
+        let Some(m) = m else { break };
         let m = m.map_err(|e| anyhow::anyhow!("event stream: {e}"))?;
         let p = m.subject.rsplit('.').next().and_then(|s| s.parse::<usize>().ok());
         let t = super::header_f64(&m.message, header::TIME);
-        let mark = match (p, t) {
-            (Some(p), Some(t)) => marks.mark(p, t, super::is_end(&m.message)),
-            _ => Mark::Unknown,
+        let events = match wire::decode::<Vec<Event>>(&m.payload) {
+            Ok(events) => events,
+            Err(e) => {
+                stats.bad_batches += 1;
+                tracing::warn!(error = %e, "event batch unreadable: skipped");
+                continue;
+            }
+        };
+        let (mark, now) = match (p, t) {
+            (Some(p), Some(t)) => (marks.mark(p, t, super::is_end(&m.message)), t),
+            _ => (Mark::Unknown, f64::NAN),
         };
         match mark {
             Mark::Unknown => {
@@ -180,28 +262,35 @@ pub async fn run(
             Mark::New => stats.batches += 1,
         }
         stats.frames += super::header_f64(&m.message, header::FRAMES).unwrap_or(0.0) as u64;
-        out.write_all(&m.payload).context("writing output")?;
-        for line in m.payload.split(|&b| b == b'\n').filter(|l| !l.is_empty()) {
-            stats.lines += 1;
-            cross.on_line(line);
+        sinks.send(&events, &ids, now, &mut stats)?;
+        for ev in &events {
+            cross.on_event(ev);
         }
         let common = marks.common();
         if common.is_finite() {
             cross.advance(common, &mut alerts);
         }
-        for ev in alerts.drain(..) {
-            text.clear();
-            write_event(&mut text, &ev, |_| "?");
-            out.write_all(&text).context("writing output")?;
+        if !alerts.is_empty() {
+            sinks.send(&alerts, &ids, now, &mut stats)?;
+            alerts.clear();
         }
         if marks.all_ended() {
             break;
         }
     }
-    out.flush().context("writing output")?;
+    sinks.file.flush().context("writing output")?;
+    for t in http_tasks {
+        t.abort();
+    }
     println!(
-        "publisher: batches={} frames={} lines={} conflicts={} replayed_batches={} bad_batches={}",
-        stats.batches, stats.frames, stats.lines, cross.raised, stats.replayed_batches, stats.bad_batches
+        "publisher: batches={} frames={} events={} conflicts={} replayed_batches={} bad_batches={} unknown_receivers={}",
+        stats.batches,
+        stats.frames,
+        stats.events,
+        cross.raised,
+        stats.replayed_batches,
+        stats.bad_batches,
+        stats.unknown_receivers
     );
     Ok(stats)
 }
@@ -209,22 +298,24 @@ pub async fn run(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::publish::test_report::{report, Source};
 
-    fn line(hex: &str, id: u64, t: f64, lon: f64, ve: f64, source: &str) -> String {
-        format!(
-            r#"{{"type":"track","id":{id},"hex":"{hex}","t":{t},"lat":48.5,"lon":{lon},"alt_m":3000.0,"alt_baro_ft":9800,"vel_enu":[{ve},0.0,0.0],"cov_en":[[100.0,0.0],[0.0,100.0]],"source":"{source}","sources":["adsb"],"period_s":1.0,"motion":"moving","adsb_suspect":false}}"#
-        )
+    /// Track `id` of `hex` at `t`, at 48.5 N and `lon`, 3000 m, flying east at `ve` m/s.
+    fn track(hex: u32, id: u64, t: f64, lon: f64, ve: f64, source: TrackSource) -> Event {
+        let mut r = report(hex, t, &[Source::Adsb]);
+        (r.id, r.source, r.alt_baro_ft) = (id, source, Some(9800));
+        (r.est.lat, r.est.lon, r.est.alt_m, r.est.vel_enu) = (48.5, lon, Some(3000.0), [ve, 0.0, 0.0]);
+        Event::Track(Box::new(r))
     }
 
     #[test]
     fn two_partitions_tracks_closing_head_on_raise_one_alert_then_clear_it() {
         let mut cross = CrossPartition::new(&CoreConfig::default());
         // 12 km apart at 48.5 N, closing at 400 m/s, same level.
-        cross.on_line(line("AAAAAA", 1, 100.0, 2.0, 200.0, "fused").as_bytes());
-        cross.on_line(line("BBBBBB", 14, 100.0, 2.0 + 12_000.0 / 73_800.0, -200.0, "fused").as_bytes());
+        cross.on_event(&track(0xAAAAAA, 1, 100.0, 2.0, 200.0, TrackSource::Fused));
+        cross.on_event(&track(0xBBBBBB, 14, 100.0, 2.0 + 12_000.0 / 73_800.0, -200.0, TrackSource::Fused));
         // A single-source track and other records are not tracks to assess.
-        cross.on_line(line("CCCCCC", 3, 100.0, 2.08, -200.0, "adsb").as_bytes());
-        cross.on_line(br#"{"type":"mlat","hex":"DDDDDD","t":100.0}"#);
+        cross.on_event(&track(0xCCCCCC, 3, 100.0, 2.08, -200.0, TrackSource::Adsb));
         let mut out = Vec::new();
         cross.advance(100.5, &mut out);
         assert_eq!(out.len(), 1, "{out:?}");
@@ -240,5 +331,17 @@ mod tests {
             matches!(&out[..], [Event::Alert(crate::fuse::Alert::Conflict { active: false, .. })]),
             "{out:?}"
         );
+    }
+
+    /// A batch of events goes through the wire as it was, every field.
+    #[test]
+    fn events_cross_the_wire_unchanged() {
+        let events = vec![
+            track(0xAAAAAA, 1, 100.0, 2.0, 200.0, TrackSource::Fused),
+            track(0xCCCCCC, 3, 100.5, 2.08, -200.0, TrackSource::Adsb),
+        ];
+        let back: Vec<Event> = wire::decode(&wire::encode(&events)).unwrap();
+        assert_eq!(back, events);
+        assert!(wire::decode::<Vec<Event>>(b"\x05garbage").is_err());
     }
 }

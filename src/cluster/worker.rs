@@ -26,7 +26,6 @@ use super::{header, headers, ClusterConfig, Nats};
 use crate::core::{Core, CoreConfig, Event};
 use crate::feed::capture::ReceiverDecl;
 use crate::mlat::shared::SyncSnapshot;
-use crate::publish::json::write_event;
 
 /// One frame batch for the processing thread.
 struct Batch {
@@ -243,14 +242,13 @@ impl Processor {
             part.core.finish(&mut events);
         }
         self.stats.batches += 1;
-        let mut text = Vec::new();
-        for ev in &events {
-            if matches!(ev, Event::Receiver(_)) {
-                self.stats.receiver_records += 1;
-                continue;
-            }
-            write_event(&mut text, ev, |i| part.core.receiver_id(i));
-        }
+        // A partition's receiver records would speak for its share of the
+        // traffic only: not published. The rest go to the publisher as
+        // they are.
+        let before = events.len();
+        events.retain(|ev| !matches!(ev, Event::Receiver(_)));
+        self.stats.receiver_records += (before - events.len()) as u64;
+        let text = wire::encode(&events);
         let notes = part.core.mlat_mut().take_sync_notes();
         self.stats.sync_notes += notes.len() as u64;
         // This core's pair updates since the last batch (none, in shared mode).

@@ -92,7 +92,7 @@ impl CoreConfig {
 }
 
 /// How a report's time of applicability was found.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum Dating {
     /// A GPS-timed receiver's timestamp, or a counter synchronised with one
     /// (within a microsecond).
@@ -105,7 +105,7 @@ pub enum Dating {
 }
 
 /// A decoded ADS-B position report, as broadcast (not yet tracked).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PositionReport {
     pub addr: u32,
     /// Time of applicability (Unix s): exact for GPS-timed receivers, the
@@ -128,7 +128,7 @@ pub struct PositionReport {
     pub rx: usize,
 }
 
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum Event {
     Position(PositionReport),
     Mlat(Box<MlatFix>),

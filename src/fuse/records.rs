@@ -15,7 +15,7 @@ pub enum Output {
 }
 
 /// A change worth telling subscribers (contract `type: "alert"`).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum Alert {
     /// The timing contradicts (or again confirms) an aircraft's ADS-B positions.
     AdsbSuspect { t: f64, addr: u32, id: u64, suspect: bool, offset_m: f64, nis: f64 },
@@ -29,7 +29,7 @@ pub type Sources = smallvec::SmallVec<[Source; 2]>;
 
 /// Which track a report is of: the fused one, or one source's alone
 /// (`--source-tracks`). The track stream's `source`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 pub enum TrackSource {
     Fused,
     Adsb,
@@ -56,7 +56,7 @@ impl From<Source> for TrackSource {
 }
 
 /// A published track state (contract `type: "track"`).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TrackReport {
     pub id: u64,
     pub addr: u32,

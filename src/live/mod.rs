@@ -158,6 +158,8 @@ fn realtime(priority: u8) -> std::io::Result<()> {
 
 /// The service until SIGTERM or SIGINT; its frames to `sink` (a core when `None`).
 pub async fn serve(path: PathBuf, cfg: Config, sink: Option<Sink>) -> Result<()> {
+    let ingest_only = matches!(sink, Some(Sink::Cluster(..)));
+    let cfg = for_sink(cfg, ingest_only);
     let registry = Arc::new(Registry { queue_frames: cfg.service.queue_frames, ..Default::default() });
     let (http_tasks, web) = start_http(&cfg, &registry).await?;
     // Every message holds a frame or more: the frames' bound bites first.
@@ -254,7 +256,7 @@ pub async fn serve(path: PathBuf, cfg: Config, sink: Option<Sink>) -> Result<()>
                 // the unit's ExecReload checks the file first, so a
                 // configuration refused fails `systemctl reload` itself.
                 let _ = sd_notify::notify(&[sd_notify::NotifyState::Reloading]);
-                let status = match Config::load(&path) {
+                let status = match Config::load(&path).map(|c| for_sink(c, ingest_only)) {
                     Ok(new) => {
                         let left_out = reload(&new, &current, &registry, &tx, &mut tasks, &spawn_all, &mut streams).await;
                         current = new;
@@ -283,10 +285,21 @@ pub async fn serve(path: PathBuf, cfg: Config, sink: Option<Sink>) -> Result<()>
     Ok(())
 }
 
+/// A cluster's ingest puts frames on NATS and makes no tracks: the outputs
+/// and the map are its publisher's (which may share the process and its
+/// ports), the metrics endpoint stays.
+fn for_sink(cfg: Config, ingest_only: bool) -> Config {
+    if !ingest_only {
+        return cfg;
+    }
+    let http = crate::live::config::HttpConfig { listen: None, ..cfg.http };
+    Config { output: Vec::new(), http, ..cfg }
+}
+
 /// The Prometheus endpoint and the HTTP server, each bound before anything
 /// runs (a taken port fails the start); the documents the HTTP server hands
 /// out, for the tracker thread to render, when it is on.
-async fn start_http(
+pub(crate) async fn start_http(
     cfg: &Config,
     registry: &Arc<Registry>,
 ) -> Result<(Vec<tokio::task::JoinHandle<()>>, Option<Arc<web::WebData>>)> {

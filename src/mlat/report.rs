@@ -6,7 +6,7 @@
 //! learning until enough of its copies went into fixes or its clock pairs.
 
 /// A receiver's standing in multilateration.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum RxState {
     /// Too little seen yet to say.
     Learning,
@@ -25,7 +25,7 @@ impl RxState {
 }
 
 /// Why a receiver is out of the fixes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Exclusion {
     /// Its clock pairs keep rejecting its measurements (a broken or
     /// unstable clock): still synchronised, readmitted when they hold.
@@ -73,7 +73,7 @@ pub fn summary(r: &ReceiverReport, id: &str) -> String {
     s
 }
 
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ReceiverReport {
     /// Data time of the report (s).
     pub t: f64,

@@ -8,7 +8,7 @@ use super::kf::Gaussian;
 use super::plane::Plane;
 
 /// A track's estimate at a time, ready to publish or fuse.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Estimate {
     pub t: f64,
     pub lat: f64,

@@ -9,7 +9,7 @@
 use nalgebra::{Matrix2, Matrix2x6, Matrix6, SMatrix, SVector, Vector2, Vector6};
 
 /// A state estimate: mean `[e, n, ve, vn, ae, an]` (m, m/s, m/s^2) and covariance.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Gaussian {
     pub x: Vector6<f64>,
     pub p: Matrix6<f64>,

@@ -5,7 +5,7 @@
 use nalgebra::{Matrix2, Vector2};
 
 /// Who measured.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Source {
     Adsb = 0,

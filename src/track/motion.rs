@@ -84,7 +84,7 @@ pub fn noncentral_cdf(dof: usize, lambda: f64, x: f64) -> f64 {
 }
 
 /// Static, moving, or not yet known: the track's `motion`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Motion {
     Unknown,
     Static,

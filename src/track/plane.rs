@@ -14,7 +14,7 @@ use nalgebra::{Matrix2, Vector3};
 
 use crate::geo::{ecef_from_sin_cos, ecef_to_geodetic, geodetic_to_ecef, EARTH_MEAN_RADIUS_M};
 
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Plane {
     pub lat: f64,
     pub lon: f64,

@@ -4,7 +4,7 @@
 use crate::mlat::solver::Reject;
 
 /// One multilateration fix.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct MlatFix {
     pub addr: u32,
     /// Emission time (Unix s): exact when a GPS-timed receiver is in the
