@@ -15,7 +15,9 @@ use async_nats::jetstream::consumer::{pull, AckPolicy, DeliverPolicy};
 use futures_util::StreamExt;
 
 use super::wire::{self, SyncBatch};
-use super::{ClusterConfig, Mark, Nats, Watermarks};
+use super::{header, ClusterConfig, Mark, Nats, Watermarks};
+use crate::core::front::RECEIVER_REPORT_S;
+use crate::core::Event;
 use crate::mlat::clock::PairParams;
 use crate::mlat::shared::{Applied, SharedClock, SyncNote, SyncSnapshot};
 use crate::mlat::sync::ClockSync;
@@ -30,6 +32,8 @@ pub struct ClockStats {
     pub unknown_receiver: u64,
     pub bad_batches: u64,
     pub snapshots: u64,
+    /// Receiver records published.
+    pub receiver_records: u64,
 }
 
 /// Notes from every partition, applied in time order up to the time all have reached.
@@ -116,6 +120,8 @@ pub async fn run(nats: &Nats, cfg: &ClusterConfig, mlat: &crate::mlat::MlatConfi
         .await
         .context("cannot consume the sync notes")?;
     let mut msgs = consumer.messages().await?;
+    // Receiver records once a minute of data time, as one node's, and at the end.
+    let (mut next_records, mut last_t) = (f64::NAN, f64::NAN);
     loop {
         tokio::select! {
             // Declarations first: a note may name a receiver only just declared.
@@ -139,8 +145,18 @@ pub async fn run(nats: &Nats, cfg: &ClusterConfig, mlat: &crate::mlat::MlatConfi
                 };
                 if let Some(s) = merger.on_batch(batch, end) {
                     nats.clock.put("snapshot", wire::encode(&s).into()).await.context("cannot store the clock snapshot")?;
+                    if s.t.is_finite() {
+                        last_t = s.t;
+                        if next_records.is_nan() {
+                            next_records = s.t + RECEIVER_REPORT_S;
+                        } else if s.t >= next_records {
+                            next_records = s.t + RECEIVER_REPORT_S;
+                            publish_records(nats, &mut merger, s.t, false).await?;
+                        }
+                    }
                 }
                 if merger.all_ended() {
+                    publish_records(nats, &mut merger, last_t, true).await?;
                     break;
                 }
             }
@@ -149,7 +165,7 @@ pub async fn run(nats: &Nats, cfg: &ClusterConfig, mlat: &crate::mlat::MlatConfi
     let s = merger.stats;
     println!(
         "clock: batches={} notes={} applied={} sync_updates={} replayed_batches={} duplicate_resets={} \
-         unknown_receiver={} bad_batches={} snapshots={}",
+         unknown_receiver={} bad_batches={} snapshots={} receiver_records={}",
         s.batches,
         s.notes,
         s.applied,
@@ -158,9 +174,24 @@ pub async fn run(nats: &Nats, cfg: &ClusterConfig, mlat: &crate::mlat::MlatConfi
         s.duplicate_resets,
         s.unknown_receiver,
         s.bad_batches,
-        s.snapshots
+        s.snapshots,
+        s.receiver_records
     );
     Ok(s)
+}
+
+/// Every receiver's record at `t` (the network's: the clock has every
+/// receiver's synchronisation and timing), on the events stream's `clock`
+/// subject, for the publisher; `end` marks the last.
+async fn publish_records(nats: &Nats, merger: &mut Merger, t: f64, end: bool) -> Result<()> {
+    let events: Vec<Event> =
+        merger.clock.receiver_reports(t).into_iter().map(|r| Event::Receiver(Box::new(r))).collect();
+    merger.stats.receiver_records += events.len() as u64;
+    let h = super::headers(&format!("r{t}-{end}"), end, &[(header::TIME, t)]);
+    let ack =
+        nats.js.publish_with_headers(nats.names.clock_records(), h, wire::encode(&events).into()).await?;
+    ack.await.context("cannot store the receiver records")?;
+    Ok(())
 }
 
 #[cfg(test)]

@@ -161,6 +161,11 @@ impl Names {
     pub fn events(&self, p: u32) -> String {
         format!("{}.events.{p}", self.name)
     }
+
+    /// The clock's receiver records, beside the partitions' events.
+    pub fn clock_records(&self) -> String {
+        format!("{}.events.{CLOCK_RECORDS}", self.name)
+    }
     pub fn sync(&self, p: u32) -> String {
         format!("{}.sync.{p}", self.name)
     }
@@ -170,6 +175,9 @@ impl Names {
 }
 
 /// Message headers the roles read.
+/// The last token of the clock's receiver records' subject.
+pub const CLOCK_RECORDS: &str = "clock";
+
 pub mod header {
     /// The data time a batch runs to (s).
     pub const TIME: &str = "Fuse1090-Time";

@@ -132,6 +132,10 @@ pub struct PublisherStats {
     pub unknown_receivers: u64,
 }
 
+/// How long a replay's publisher waits, once every partition has ended,
+/// for the clock's last receiver records.
+const CLOCK_END_WAIT: std::time::Duration = std::time::Duration::from_secs(10);
+
 /// Where the events go: the `--output` file, the configuration's
 /// `[[output]]` destinations and the HTTP server's documents, as a single
 /// node has them.
@@ -222,7 +226,11 @@ pub async fn run(
         .context("cannot consume the events")?;
     let mut msgs = consumer.messages().await?;
     let mut alerts = Vec::new();
+    // A replay ends with every partition's last batch and the clock's last
+    // receiver records, which may come a little after.
+    let mut clock_ended = false;
     loop {
+        let ended = marks.all_ended();
         let m = tokio::select! {
             // Declarations first: an event may name a receiver only just declared.
             biased;
@@ -233,10 +241,30 @@ pub async fn run(
                 continue;
             }
             m = msgs.next() => m,
+            _ = tokio::time::sleep(CLOCK_END_WAIT), if ended => {
+                tracing::warn!("the clock's last receiver records did not come: ending without them");
+                break;
+            }
         };
         let Some(m) = m else { break };
         let m = m.map_err(|e| anyhow::anyhow!("event stream: {e}"))?;
-        let p = m.subject.rsplit('.').next().and_then(|s| s.parse::<usize>().ok());
+        let last = m.subject.rsplit('.').next().unwrap_or("");
+        if last == super::CLOCK_RECORDS {
+            // The network's receiver records: not a partition's, no time to mark.
+            match wire::decode::<Vec<Event>>(&m.payload) {
+                Ok(events) => {
+                    let t = super::header_f64(&m.message, header::TIME).unwrap_or(f64::NAN);
+                    sinks.send(&events, &ids, t, &mut stats)?;
+                }
+                Err(_) => stats.bad_batches += 1,
+            }
+            clock_ended |= super::is_end(&m.message);
+            if marks.all_ended() && clock_ended {
+                break;
+            }
+            continue;
+        }
+        let p = last.parse::<usize>().ok();
         let t = super::header_f64(&m.message, header::TIME);
         let events = match wire::decode::<Vec<Event>>(&m.payload) {
             Ok(events) => events,
@@ -274,7 +302,7 @@ pub async fn run(
             sinks.send(&alerts, &ids, now, &mut stats)?;
             alerts.clear();
         }
-        if marks.all_ended() {
+        if marks.all_ended() && clock_ended {
             break;
         }
     }

@@ -63,7 +63,7 @@ struct GroupCtx<'a> {
 /// Finest step of time the tracker is told of (s).
 const ADVANCE_STEP_S: f64 = 0.001;
 /// How often (data time, s) every receiver's state goes into the track stream.
-const RECEIVER_REPORT_S: f64 = 60.0;
+pub const RECEIVER_REPORT_S: f64 = 60.0;
 
 pub struct Front {
     receivers: Vec<RxState>,

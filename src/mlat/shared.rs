@@ -99,19 +99,34 @@ pub enum Applied {
 pub struct SharedClock {
     pub sync: ClockSync,
     pub timing: Vec<TimingModel>,
+    clocks: Vec<ClockKind>,
     last_reset: Vec<f64>,
 }
 
 impl SharedClock {
     pub fn new(sync: ClockSync) -> Self {
-        SharedClock { sync, timing: Vec::new(), last_reset: Vec::new() }
+        SharedClock { sync, timing: Vec::new(), clocks: Vec::new(), last_reset: Vec::new() }
     }
 
     /// A receiver, its timing model starting from `prior` (the configured jitter's).
     pub fn add_receiver(&mut self, clock: ClockKind, id: &str, prior: TimingModel) {
         self.sync.add_receiver(clock, id);
         self.timing.push(prior);
+        self.clocks.push(clock);
         self.last_reset.push(f64::NEG_INFINITY);
+    }
+
+    /// Every receiver's report at `t` as the whole network's clock and
+    /// timing models say (the workers' position surveys are not here).
+    pub fn receiver_reports(&self, t: f64) -> Vec<crate::mlat::ReceiverReport> {
+        (0..self.receivers())
+            .map(|rx| {
+                let h = &self.sync.health[rx];
+                let reason = h.excluded.then_some(crate::mlat::Exclusion::SyncFailing);
+                let timings = self.clocks.iter().copied().zip(&self.timing);
+                crate::mlat::engine::timing_report(rx, t, reason, h, timings)
+            })
+            .collect()
     }
 
     pub fn receivers(&self) -> usize {

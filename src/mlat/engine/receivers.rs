@@ -10,13 +10,13 @@ use crate::geo::{ecef_distance, geodetic_to_ecef};
 use crate::mlat::report::{Exclusion, ReceiverReport, RxState};
 use crate::mlat::state::{LearntReceiver, LearntState};
 use crate::mlat::survey::Survey;
+use crate::mlat::sync::RxHealth;
 use crate::mlat::timing::TimingModel;
 
 impl Mlat {
     /// What is known of receiver `rx` at data time `t` (see [`ReceiverReport`]).
     pub fn receiver_report(&self, rx: usize, t: f64) -> ReceiverReport {
         let (r, h) = (&self.rxs[rx], &self.sync.health[rx]);
-        let learnt = r.timing.learnt();
         let reason = if r.jumps > JUMPS_EXCLUDE {
             Some(Exclusion::TimeJumps)
         } else if r.misplaced {
@@ -24,34 +24,12 @@ impl Mlat {
         } else {
             h.excluded.then_some(Exclusion::SyncFailing)
         };
-        let state = if reason.is_some() {
-            RxState::Excluded
-        } else if learnt || h.sync_updates >= crate::mlat::sync::HEALTH_MIN_UPDATES {
-            RxState::Ok
-        } else {
-            RxState::Learning
-        };
-        // Biases are relative (a common one goes into the emission time):
-        // a GPS receiver's is told against the other GPS receivers' mean.
-        let gps: Vec<f64> = (self.rxs.iter())
-            .filter(|o| o.clock == ClockKind::Gps && o.timing.learnt())
-            .map(|o| o.timing.offset_s)
-            .collect();
-        let offset_ns = (r.clock == ClockKind::Gps && learnt && gps.len() >= 2)
-            .then(|| (r.timing.offset_s - gps.iter().sum::<f64>() / gps.len() as f64) * 1e9);
+        let timings = self.rxs.iter().map(|o| (o.clock, &o.timing));
+        let mut report = timing_report(rx, t, reason, h, timings);
         let offset = r.survey.offset();
-        ReceiverReport {
-            t,
-            rx,
-            state,
-            reason,
-            sigma_ns: learnt.then(|| r.timing.sigma() * 1e9),
-            offset_ns,
-            outlier_rate: learnt.then_some(r.timing.late_rate),
-            late_delay_ns: learnt.then_some(r.timing.late_mean_s * 1e9),
-            position_offset_en_m: offset.map(|o| [o.enu_m[0], o.enu_m[1]]),
-            position_offset_sigma_m: offset.map(|o| o.sigma_m),
-        }
+        report.position_offset_en_m = offset.map(|o| [o.enu_m[0], o.enu_m[1]]);
+        report.position_offset_sigma_m = offset.map(|o| o.sigma_m);
+        report
     }
 
     /// What has been learnt of every receiver, to be kept across a restart.
@@ -115,5 +93,53 @@ impl Mlat {
             .map(|k| crate::mlat::report::summary(&self.receiver_report(k, now), &names(k)))
             .collect();
         format!("mlat receivers (state/sigma/offset/outliers/position): {}", all.join(" "))
+    }
+}
+
+/// Receiver `rx`'s report at `t` from its clock health and its timing model
+/// (`timings`: every receiver's clock and model, in order), out of the
+/// fixes for `reason`; its position fields left out. The engine adds its
+/// survey; a cluster's clock, which learns the timing and has no survey,
+/// reports this.
+pub fn timing_report<'a>(
+    rx: usize,
+    t: f64,
+    reason: Option<Exclusion>,
+    h: &RxHealth,
+    timings: impl Iterator<Item = (ClockKind, &'a TimingModel)>,
+) -> ReceiverReport {
+    // Biases are relative (a common one goes into the emission time):
+    // a GPS receiver's is told against the other GPS receivers' mean.
+    let (mut own, mut gps) = (None, Vec::new());
+    for (k, (clock, m)) in timings.enumerate() {
+        if k == rx {
+            own = Some((clock, *m));
+        }
+        if clock == ClockKind::Gps && m.learnt() {
+            gps.push(m.offset_s);
+        }
+    }
+    let (clock, m) = own.expect("the receiver among the timings");
+    let learnt = m.learnt();
+    let state = if reason.is_some() {
+        RxState::Excluded
+    } else if learnt || h.sync_updates >= crate::mlat::sync::HEALTH_MIN_UPDATES {
+        RxState::Ok
+    } else {
+        RxState::Learning
+    };
+    let offset_ns = (clock == ClockKind::Gps && learnt && gps.len() >= 2)
+        .then(|| (m.offset_s - gps.iter().sum::<f64>() / gps.len() as f64) * 1e9);
+    ReceiverReport {
+        t,
+        rx,
+        state,
+        reason,
+        sigma_ns: learnt.then(|| m.sigma() * 1e9),
+        offset_ns,
+        outlier_rate: learnt.then_some(m.late_rate),
+        late_delay_ns: learnt.then_some(m.late_mean_s * 1e9),
+        position_offset_en_m: None,
+        position_offset_sigma_m: None,
     }
 }
