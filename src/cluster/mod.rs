@@ -174,10 +174,10 @@ impl Names {
     }
 }
 
-/// Message headers the roles read.
 /// The last token of the clock's receiver records' subject.
 pub const CLOCK_RECORDS: &str = "clock";
 
+/// Message headers the roles read.
 pub mod header {
     /// The data time a batch runs to (s).
     pub const TIME: &str = "Fuse1090-Time";

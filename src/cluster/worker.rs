@@ -248,7 +248,7 @@ impl Processor {
         let before = events.len();
         events.retain(|ev| !matches!(ev, Event::Receiver(_)));
         self.stats.receiver_records += (before - events.len()) as u64;
-        let text = wire::encode(&events);
+        let events = wire::encode(&events);
         let notes = part.core.mlat_mut().take_sync_notes();
         self.stats.sync_notes += notes.len() as u64;
         // This core's pair updates since the last batch (none, in shared mode).
@@ -268,16 +268,8 @@ impl Processor {
             let _ = self.out.send(FromCore::Checkpoint { p, bytes });
         }
         let frames = self.stats.frames - frames_before;
-        let done = FromCore::Done {
-            p,
-            seq: b.seq,
-            t: b.t,
-            end: b.end,
-            frames,
-            events: text,
-            sync,
-            msg: Box::new(b.msg),
-        };
+        let done =
+            FromCore::Done { p, seq: b.seq, t: b.t, end: b.end, frames, events, sync, msg: Box::new(b.msg) };
         let _ = self.out.send(done);
         *self.shown.lock().expect("stats lock") = self.stats;
     }

@@ -32,7 +32,7 @@ mod config;
 mod outcome;
 mod placement;
 mod receivers;
-pub use receivers::timing_report;
+pub use receivers::{gps_mean_offset, timing_report};
 mod robust;
 mod shared_mode;
 mod stats;

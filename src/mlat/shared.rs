@@ -119,12 +119,13 @@ impl SharedClock {
     /// Every receiver's report at `t` as the whole network's clock and
     /// timing models say (the workers' position surveys are not here).
     pub fn receiver_reports(&self, t: f64) -> Vec<crate::mlat::ReceiverReport> {
+        use crate::mlat::engine::{gps_mean_offset, timing_report};
+        let gps_mean = gps_mean_offset(self.clocks.iter().copied().zip(&self.timing));
         (0..self.receivers())
             .map(|rx| {
                 let h = &self.sync.health[rx];
                 let reason = h.excluded.then_some(crate::mlat::Exclusion::SyncFailing);
-                let timings = self.clocks.iter().copied().zip(&self.timing);
-                crate::mlat::engine::timing_report(rx, t, reason, h, timings)
+                timing_report(rx, t, reason, h, self.clocks[rx], &self.timing[rx], gps_mean)
             })
             .collect()
     }

@@ -449,14 +449,15 @@ pub struct Lessons {
 }
 
 impl Lessons {
-    /// Lessons of a fix that had a receiver whose timing is given (the
-    /// configuration's `[receiver.timing]`): its offset is the time scale,
-    /// so the learning receivers' offsets are measured against it and their
-    /// common step is kept. (Taken back, a lone learning receiver among
-    /// given ones could never move, and several kept whatever common error
-    /// they started with, against the given ones' absolute offsets.)
-    pub fn anchored() -> Lessons {
-        Lessons { anchored: true, ..Lessons::default() }
+    /// A fix's lessons; `anchored` when it had a receiver whose timing is
+    /// given (the configuration's `[receiver.timing]`): its offset is the
+    /// time scale, so the learning receivers' offsets are measured against
+    /// it and their common step is kept. (Taken back, a lone learning
+    /// receiver among given ones could never move, and several kept
+    /// whatever common error they started with, against the given ones'
+    /// absolute offsets.)
+    pub fn new(anchored: bool) -> Lessons {
+        Lessons { anchored, ..Lessons::default() }
     }
 
     #[inline]
@@ -492,7 +493,7 @@ pub fn learn_residuals(
     anchored: bool,
     models: &mut impl TimingModels,
 ) -> smallvec::SmallVec<[usize; 16]> {
-    let mut lessons = if anchored { Lessons::anchored() } else { Lessons::default() };
+    let mut lessons = Lessons::new(anchored);
     for r in res {
         lessons.teach(r, models);
     }

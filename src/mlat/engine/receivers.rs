@@ -24,8 +24,8 @@ impl Mlat {
         } else {
             h.excluded.then_some(Exclusion::SyncFailing)
         };
-        let timings = self.rxs.iter().map(|o| (o.clock, &o.timing));
-        let mut report = timing_report(rx, t, reason, h, timings);
+        let gps_mean = gps_mean_offset(self.rxs.iter().map(|o| (o.clock, &o.timing)));
+        let mut report = timing_report(rx, t, reason, h, r.clock, &r.timing, gps_mean);
         let offset = r.survey.offset();
         report.position_offset_en_m = offset.map(|o| [o.enu_m[0], o.enu_m[1]]);
         report.position_offset_sigma_m = offset.map(|o| o.sigma_m);
@@ -96,30 +96,33 @@ impl Mlat {
     }
 }
 
-/// Receiver `rx`'s report at `t` from its clock health and its timing model
-/// (`timings`: every receiver's clock and model, in order), out of the
-/// fixes for `reason`; its position fields left out. The engine adds its
-/// survey; a cluster's clock, which learns the timing and has no survey,
-/// reports this.
-pub fn timing_report<'a>(
+/// The mean offset (s) of the GPS-timed receivers whose timing is learnt,
+/// when there are two or more (`timings`: every receiver's clock and model):
+/// biases are relative (a common one goes into the emission time), so a GPS
+/// receiver's is told against this.
+pub fn gps_mean_offset<'a>(timings: impl Iterator<Item = (ClockKind, &'a TimingModel)>) -> Option<f64> {
+    let (mut n, mut sum) = (0usize, 0.0);
+    for (_, m) in timings.filter(|(clock, m)| *clock == ClockKind::Gps && m.learnt()) {
+        n += 1;
+        sum += m.offset_s;
+    }
+    (n >= 2).then(|| sum / n as f64)
+}
+
+/// Receiver `rx`'s report at `t` from its clock health `h` and its timing
+/// model `m`, out of the fixes for `reason`, a GPS receiver's offset told
+/// against `gps_mean` ([`gps_mean_offset`]); its position fields left out.
+/// The engine adds its survey; a cluster's clock, which learns the timing
+/// and has no survey, reports this.
+pub fn timing_report(
     rx: usize,
     t: f64,
     reason: Option<Exclusion>,
     h: &RxHealth,
-    timings: impl Iterator<Item = (ClockKind, &'a TimingModel)>,
+    clock: ClockKind,
+    m: &TimingModel,
+    gps_mean: Option<f64>,
 ) -> ReceiverReport {
-    // Biases are relative (a common one goes into the emission time):
-    // a GPS receiver's is told against the other GPS receivers' mean.
-    let (mut own, mut gps) = (None, Vec::new());
-    for (k, (clock, m)) in timings.enumerate() {
-        if k == rx {
-            own = Some((clock, *m));
-        }
-        if clock == ClockKind::Gps && m.learnt() {
-            gps.push(m.offset_s);
-        }
-    }
-    let (clock, m) = own.expect("the receiver among the timings");
     let learnt = m.learnt();
     let state = if reason.is_some() {
         RxState::Excluded
@@ -128,8 +131,8 @@ pub fn timing_report<'a>(
     } else {
         RxState::Learning
     };
-    let offset_ns = (clock == ClockKind::Gps && learnt && gps.len() >= 2)
-        .then(|| (m.offset_s - gps.iter().sum::<f64>() / gps.len() as f64) * 1e9);
+    let offset_ns =
+        gps_mean.filter(|_| clock == ClockKind::Gps && learnt).map(|mean| (m.offset_s - mean) * 1e9);
     ReceiverReport {
         t,
         rx,

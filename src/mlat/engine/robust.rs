@@ -171,7 +171,7 @@ impl Mlat {
         let shared = self.shared.is_some();
         let anchored = sites.iter().any(|site| site.iter().any(|&rx| self.rxs[rx].timing_known));
         let mut res: GroupVec<Residual> = GroupVec::new();
-        let mut lessons = if anchored { Lessons::anchored() } else { Lessons::default() };
+        let mut lessons = Lessons::new(anchored);
         for (k, (site, &var)) in sites.iter().zip(sync_vars).enumerate() {
             let (r, h) = judged.at.residual(k);
             // A merged site's residual is no single receiver's (nor verdict).
