@@ -36,6 +36,9 @@ pub(super) fn front_metrics(
     // and GPS times off by seconds from the others'.
     let m = &front.mlat().stats;
     metrics::counter!("fuse1090_mlat_outliers_dropped_total").absolute(m.outliers_dropped);
+    // Fixes whose first search for outliers left out a copy that came out
+    // early at its fix, solved again with each copy left out in turn.
+    metrics::counter!("fuse1090_mlat_refixed_total").absolute(m.refixed);
     metrics::counter!("fuse1090_mlat_gps_time_jumps_total").absolute(m.time_jumps);
     // Transmissions that gave no fix, per reason (every reason, zeros too,
     // so that a dashboard has each series from the start).

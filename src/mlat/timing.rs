@@ -33,6 +33,9 @@ const PRIOR_LATE_MEAN_S: f64 = 300e-9;
 /// never be learnt again, and a receiver late more often than not has no
 /// core to speak of (its copies are then mostly dropped as outliers).
 const LATE_RATE_RANGE: (f64, f64) = (0.002, 0.5);
+/// Off by more than this many sigmas of its core, a copy is more than any
+/// core explains: late by multipath if late, a glitch if early.
+pub const GLITCH_Z: f64 = 6.0;
 /// A learnt offset is applied only after this many residuals.
 pub const MIN_RESIDUALS: u64 = 20;
 
@@ -117,12 +120,12 @@ impl Verdict {
     /// An outlier: late by the model's odds, or off by more than any
     /// Gaussian core explains (an early copy cannot be multipath; a glitch).
     pub fn outlier(&self) -> bool {
-        self.p_late > 0.5 || self.z.abs() > 6.0
+        self.p_late > 0.5 || self.z.abs() > GLITCH_Z
     }
 
     /// How strongly (to pick the worst of several).
     pub fn score(&self) -> f64 {
-        self.p_late.max((self.z.abs() / 6.0).min(1.0)) + self.z.abs() * 1e-3
+        self.p_late.max((self.z.abs() / GLITCH_Z).min(1.0)) + self.z.abs() * 1e-3
     }
 }
 

@@ -9,6 +9,11 @@ use crate::feed::capture::ClockKind;
 use crate::geo::{ecef_distance, geodetic_to_ecef};
 use crate::mlat::solver::C_AIR;
 
+/// The surveyed position in use follows the survey once it moves by more
+/// than this many of its sigmas, and at least this far (m).
+const FOLLOW_SIGMAS: f64 = 2.0;
+const FOLLOW_FLOOR_M: f64 = 1.0;
+
 impl Mlat {
     /// One ADS-B position, multilaterated: each receiver's range excess
     /// against the emission time the others give it (see
@@ -107,17 +112,26 @@ impl Mlat {
     }
 
     /// Puts a misplaced receiver where the traffic says it is (or back where
-    /// it was declared once the survey no longer says so). Its clock pairs
-    /// start again: what they learnt rested on the old position.
+    /// it was declared once the survey no longer says so), and follows the
+    /// survey as it firms up: a position held at the first estimate until
+    /// the survey moved 10 m from it kept metres of error in every fix the
+    /// receiver was in, all in one direction, with a covariance that knew
+    /// nothing of it. Its clock pairs start again when it is relocated.
     fn apply_survey(&mut self, rx: usize, now: f64) {
         let r = &self.rxs[rx];
         let target =
             r.survey.offset().filter(|o| o.misplaced()).map(|o| ([o.enu_m[0], o.enu_m[1]], o.sigma_m));
         let moved = match (r.surveyed, target) {
             (None, None) => false,
-            (Some(a), Some((t, sigma))) => (a[0] - t[0]).hypot(a[1] - t[1]) > (3.0 * sigma).max(10.0),
+            (Some(a), Some((t, sigma))) => {
+                (a[0] - t[0]).hypot(a[1] - t[1]) > (FOLLOW_SIGMAS * sigma).max(FOLLOW_FLOOR_M)
+            }
             _ => true,
         };
+        // Declared to surveyed, or back: what the pairs learnt rested on a
+        // position tens of metres off. A surveyed position made more
+        // precise moves their ranges by nanoseconds, which they follow.
+        let relocated = r.surveyed.is_none() || target.is_none();
         if !moved {
             return;
         }
@@ -132,7 +146,9 @@ impl Mlat {
             None => r.declared_ecef,
         };
         tracing::info!(receiver = %r.id, offset_en_m = ?r.surveyed, "self-survey: the receiver's position in use changed");
-        self.sync.reset_pairs(rx);
-        self.note_sync(crate::mlat::shared::SyncNote::ResetPairs { now, rx: rx as u32 });
+        if relocated {
+            self.sync.reset_pairs(rx);
+            self.note_sync(crate::mlat::shared::SyncNote::ResetPairs { now, rx: rx as u32 });
+        }
     }
 }

@@ -17,7 +17,74 @@ impl Mlat {
     /// covariance grows with the residuals. Returns the fix, its copies
     /// judged when the last round did so at the fix, and the copies left out
     /// in `dropped` (measurement, its site, its sync variance).
+    ///
+    /// Copies are left out one at a time, the worst first, and a late copy
+    /// of a precise receiver with high leverage can pull the fix so that
+    /// honest copies look the worst and go instead: the fix then fits what
+    /// is left, hundreds of metres off with a covariance of tens. Multipath
+    /// only delays, so a copy left out that is early beyond any core at the
+    /// fix says the search went wrong; the group is then solved again with
+    /// each copy left out first in turn.
     pub(super) fn solve_robust(
+        &mut self,
+        ms: &mut GroupVec<Measurement>,
+        sites: &mut GroupVec<Site>,
+        sync_vars: &mut GroupVec<f64>,
+        dropped: &mut Dropped,
+        alt: Option<AltitudeConstraint>,
+        guess: Option<[f64; 3]>,
+    ) -> Result<(crate::mlat::solver::Fix, Option<Judged>), Reject> {
+        let counted = self.stats.outliers_dropped;
+        let greedy = self.solve_greedy(ms, sites, sync_vars, dropped, alt, guess);
+        let early = match &greedy {
+            Ok((fix, _)) => early_copies(fix, dropped),
+            Err(_) => 0,
+        };
+        if early == 0 {
+            return greedy;
+        }
+        // Every copy back, then each left out in turn before the greedy
+        // solve; the alternative with fewer early copies left out, then more
+        // copies kept, then the lowest chi-square per degree of freedom.
+        let first = (ms.clone(), sites.clone(), sync_vars.clone(), dropped.clone());
+        let mut all: Dropped = dropped.drain(..).collect();
+        all.extend(ms.drain(..).zip(sites.drain(..)).zip(sync_vars.drain(..)).map(|((m, s), v)| (m, s, v)));
+        let mut best: Option<(usize, std::cmp::Reverse<usize>, f64, usize)> = None;
+        for skip in 0..all.len() {
+            split(&all, skip, ms, sites, sync_vars, dropped);
+            if let Ok((fix, _)) = self.solve_greedy(ms, sites, sync_vars, dropped, alt, guess) {
+                let score = (
+                    early_copies(&fix, dropped),
+                    std::cmp::Reverse(ms.len()),
+                    fix.chi2 / fix.dof.max(1) as f64,
+                    skip,
+                );
+                if best.is_none_or(|b| score.partial_cmp(&b).is_some_and(|o| o.is_lt())) {
+                    best = Some(score);
+                }
+            }
+        }
+        self.stats.outliers_dropped = counted;
+        let chosen = best.filter(|b| b.0 < early).map(|b| b.3);
+        self.stats.refixed += chosen.is_some() as u64;
+        // The greedy's own path when no alternative does better: its early
+        // copy is then a glitch of that receiver's, as early in every fix.
+        let result = match chosen {
+            Some(skip) => {
+                split(&all, skip, ms, sites, sync_vars, dropped);
+                self.solve_greedy(ms, sites, sync_vars, dropped, alt, guess)
+            }
+            None => {
+                (*ms, *sites, *sync_vars, *dropped) = first;
+                greedy
+            }
+        };
+        self.stats.outliers_dropped = counted + dropped.len() as u64;
+        result
+    }
+
+    /// The search for outliers, worst first (see [`Mlat::solve_robust`]).
+    fn solve_greedy(
         &mut self,
         ms: &mut GroupVec<Measurement>,
         sites: &mut GroupVec<Site>,
@@ -214,6 +281,43 @@ impl Mlat {
         }
         for rx in lessons.finish(&mut self.rxs) {
             self.sync.set_gps_bias(rx, self.rxs[rx].bias());
+        }
+    }
+}
+
+/// Copies left out that are early at the fix beyond any core: multipath
+/// only delays, so for these it is the fix that is wrong, not the copy (or
+/// the copy is a glitch, early whichever fix it meets).
+fn early_copies(fix: &crate::mlat::solver::Fix, dropped: &Dropped) -> usize {
+    (dropped.iter())
+        .filter(|(m, _, _)| {
+            m.t - fix.t_emit - ecef_distance(m.pos, fix.ecef) / C_AIR
+                < -crate::mlat::timing::GLITCH_Z * m.sigma_t
+        })
+        .count()
+}
+
+/// The group `all` with copy `skip` left out: the rest as measurements,
+/// that one as the first dropped.
+fn split(
+    all: &Dropped,
+    skip: usize,
+    ms: &mut GroupVec<Measurement>,
+    sites: &mut GroupVec<Site>,
+    sync_vars: &mut GroupVec<f64>,
+    dropped: &mut Dropped,
+) {
+    ms.clear();
+    sites.clear();
+    sync_vars.clear();
+    dropped.clear();
+    for (k, (m, s, v)) in all.iter().enumerate() {
+        if k == skip {
+            dropped.push((*m, s.clone(), *v));
+        } else {
+            ms.push(*m);
+            sites.push(s.clone());
+            sync_vars.push(*v);
         }
     }
 }

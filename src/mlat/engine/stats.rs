@@ -16,6 +16,9 @@ pub struct MlatStats {
     pub adsb_skipped: u64,
     /// Copies dropped as outliers so the rest of a transmission could be fixed.
     pub outliers_dropped: u64,
+    /// Fixes solved again because a copy the outlier search left out was
+    /// early at its fix (the search had been misled; see `solve_robust`).
+    pub refixed: u64,
     /// GPS-timed copies whose time disagreed with the others' by more than
     /// light takes (see `drop_gps_time_jumps`).
     pub time_jumps: u64,
