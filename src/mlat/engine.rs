@@ -135,6 +135,10 @@ struct Rx {
     declared: (f64, f64, f64),
     declared_ecef: [f64; 3],
     surveyed: Option<[f64; 2]>,
+    /// The surveyed position's uncertainty as a timing variance (s^2): its
+    /// horizontal variance per axis, and the distance to the survey's
+    /// latest estimate, which it follows only once that moves beyond it.
+    surveyed_var_s2: f64,
     /// The GPS-timed receiver its clock is best synchronised with, and when
     /// that was last chosen (arrival time).
     gps_partner: Option<(usize, f64)>,
@@ -303,6 +307,7 @@ impl Mlat {
             declared: (d.lat, d.lon, d.alt),
             declared_ecef: geodetic_to_ecef(d.lat, d.lon, d.alt),
             surveyed: None,
+            surveyed_var_s2: 0.0,
         });
         self.sync.add_receiver(d.clock, &d.id);
     }
@@ -794,7 +799,8 @@ impl Mlat {
             let rx = &self.rxs[c.rx];
             // A GPS receiver's offset came off in the common time base.
             let offset = if rx.clock == ClockKind::Gps { 0.0 } else { rx.bias() };
-            let m = Measurement { pos: rx.ecef, t: *t - offset, sigma_t: (rx.sigma().powi(2) + var).sqrt() };
+            let own = rx.sigma().powi(2) + rx.surveyed_var_s2;
+            let m = Measurement { pos: rx.ecef, t: *t - offset, sigma_t: (own + var).sqrt() };
             match ms.iter().position(|o| ecef_distance(o.pos, m.pos) < self.cfg.min_separation_m) {
                 Some(k) => {
                     self.stats.close_receivers += 1;

@@ -121,6 +121,17 @@ impl Mlat {
         let r = &self.rxs[rx];
         let target =
             r.survey.offset().filter(|o| o.misplaced()).map(|o| ([o.enu_m[0], o.enu_m[1]], o.sigma_m));
+        // What the position in use may be off by goes into its copies'
+        // variance: left out, fixes with a surveyed receiver were
+        // overconfident on held-out worlds (NEES 2.04-2.16).
+        let spread = match (r.surveyed, target) {
+            (Some(a), Some((t, sigma))) => {
+                (sigma * sigma + 0.5 * ((a[0] - t[0]).powi(2) + (a[1] - t[1]).powi(2))) / (C_AIR * C_AIR)
+            }
+            _ => 0.0,
+        };
+        self.rxs[rx].surveyed_var_s2 = spread;
+        let r = &self.rxs[rx];
         let moved = match (r.surveyed, target) {
             (None, None) => false,
             (Some(a), Some((t, sigma))) => {
@@ -138,6 +149,7 @@ impl Mlat {
         let (lat, lon, alt) = r.declared;
         let r = &mut self.rxs[rx];
         r.surveyed = target.map(|t| t.0);
+        r.surveyed_var_s2 = target.map_or(0.0, |(_, sigma)| (sigma / C_AIR).powi(2));
         r.ecef = match r.surveyed {
             Some([e, n]) => {
                 let (la, lo, h) = crate::geo::displace(lat, lon, alt, [e, n, 0.0]);
