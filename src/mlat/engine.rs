@@ -507,7 +507,7 @@ impl Mlat {
                 }
             }
         }
-        let Measured { mut ms, mut sites, mut sync_vars, sync_var, self_var, all_var } =
+        let Measured { ms, sites, sync_vars, sync_var, self_var, all_var } =
             self.measurements(&copies, &times, info.addr);
         let (baro, alt) = self.altitude_constraint(&ac, now);
         let guess = ac.last_fix.filter(|(_, t)| (now - t).abs() < 30.0).map(|(p, _)| p);
@@ -524,8 +524,9 @@ impl Mlat {
         if too_few || ambiguous {
             return self.short_of_fix(&info, &ms, &arrivals, too_few, now);
         }
-        let mut dropped = Dropped::new();
-        let solved = self.solve_robust(&mut ms, &mut sites, &mut sync_vars, &mut dropped, alt, guess);
+        let mut g = robust::GroupCopies { ms, sites, sync_vars, dropped: Dropped::new() };
+        let solved = self.solve_robust(&mut g, alt, guess);
+        let robust::GroupCopies { ms, sites, sync_vars, dropped } = g;
         let (fix, judged) = match solved {
             Ok(f) => f,
             Err(why) => {

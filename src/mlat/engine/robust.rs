@@ -27,17 +27,14 @@ impl Mlat {
     /// each copy left out first in turn.
     pub(super) fn solve_robust(
         &mut self,
-        ms: &mut GroupVec<Measurement>,
-        sites: &mut GroupVec<Site>,
-        sync_vars: &mut GroupVec<f64>,
-        dropped: &mut Dropped,
+        g: &mut GroupCopies,
         alt: Option<AltitudeConstraint>,
         guess: Option<[f64; 3]>,
     ) -> Result<(crate::mlat::solver::Fix, Option<Judged>), Reject> {
         let counted = self.stats.outliers_dropped;
-        let greedy = self.solve_greedy(ms, sites, sync_vars, dropped, alt, guess);
+        let greedy = self.solve_greedy(g, alt, guess);
         let early = match &greedy {
-            Ok((fix, _)) => early_copies(fix, dropped),
+            Ok((fix, _)) => early_copies(fix, &g.dropped),
             Err(_) => 0,
         };
         if early == 0 {
@@ -46,16 +43,18 @@ impl Mlat {
         // Every copy back, then each left out in turn before the greedy
         // solve; the alternative with fewer early copies left out, then more
         // copies kept, then the lowest chi-square per degree of freedom.
-        let first = (ms.clone(), sites.clone(), sync_vars.clone(), dropped.clone());
-        let mut all: Dropped = dropped.drain(..).collect();
-        all.extend(ms.drain(..).zip(sites.drain(..)).zip(sync_vars.drain(..)).map(|((m, s), v)| (m, s, v)));
+        let first = g.clone();
+        let mut all: Dropped = g.dropped.drain(..).collect();
+        all.extend(
+            g.ms.drain(..).zip(g.sites.drain(..)).zip(g.sync_vars.drain(..)).map(|((m, s), v)| (m, s, v)),
+        );
         let mut best: Option<(usize, std::cmp::Reverse<usize>, f64, usize)> = None;
         for skip in 0..all.len() {
-            split(&all, skip, ms, sites, sync_vars, dropped);
-            if let Ok((fix, _)) = self.solve_greedy(ms, sites, sync_vars, dropped, alt, guess) {
+            g.split(&all, skip);
+            if let Ok((fix, _)) = self.solve_greedy(g, alt, guess) {
                 let score = (
-                    early_copies(&fix, dropped),
-                    std::cmp::Reverse(ms.len()),
+                    early_copies(&fix, &g.dropped),
+                    std::cmp::Reverse(g.ms.len()),
                     fix.chi2 / fix.dof.max(1) as f64,
                     skip,
                 );
@@ -71,25 +70,22 @@ impl Mlat {
         // copy is then a glitch of that receiver's, as early in every fix.
         let result = match chosen {
             Some(skip) => {
-                split(&all, skip, ms, sites, sync_vars, dropped);
-                self.solve_greedy(ms, sites, sync_vars, dropped, alt, guess)
+                g.split(&all, skip);
+                self.solve_greedy(g, alt, guess)
             }
             None => {
-                (*ms, *sites, *sync_vars, *dropped) = first;
+                *g = first;
                 greedy
             }
         };
-        self.stats.outliers_dropped = counted + dropped.len() as u64;
+        self.stats.outliers_dropped = counted + g.dropped.len() as u64;
         result
     }
 
     /// The search for outliers, worst first (see [`Mlat::solve_robust`]).
     fn solve_greedy(
         &mut self,
-        ms: &mut GroupVec<Measurement>,
-        sites: &mut GroupVec<Site>,
-        sync_vars: &mut GroupVec<f64>,
-        dropped: &mut Dropped,
+        g: &mut GroupCopies,
         alt: Option<AltitudeConstraint>,
         guess: Option<[f64; 3]>,
     ) -> Result<(crate::mlat::solver::Fix, Option<Judged>), Reject> {
@@ -97,12 +93,9 @@ impl Mlat {
         let anchored = guess.is_some();
         let mut before: Option<crate::mlat::solver::Fix> = None;
         loop {
-            let fix = match solve(ms, alt, guess, &open) {
+            let fix = match solve(&g.ms, alt, guess, &open) {
                 Ok(f) => f,
-                Err(why) => {
-                    return before
-                        .map_or(Err(why), |b| self.undrop(ms, sites, sync_vars, dropped, b, anchored))
-                }
+                Err(why) => return before.map_or(Err(why), |b| self.undrop(g, b, anchored)),
             };
             // Without a copy the equations may have another solution that
             // fits them, far off (with one degree of freedom left, LocaRDS's
@@ -110,16 +103,16 @@ impl Mlat {
             // uncertainty of the one with the copy is not the same fix.
             if let Some(b) = before.take() {
                 if !near(&b, &fix) {
-                    return self.undrop(ms, sites, sync_vars, dropped, b, anchored);
+                    return self.undrop(g, b, anchored);
                 }
             }
             if fix.dof < 3 {
-                return self.consistent(fix, sites, anchored).map(|f| (f, None));
+                return self.consistent(fix, &g.sites, anchored).map(|f| (f, None));
             }
-            let Some(at) = AtFix::new(ms, alt, &fix) else {
-                return self.consistent(fix, sites, anchored).map(|f| (f, None));
+            let Some(at) = AtFix::new(&g.ms, alt, &fix) else {
+                return self.consistent(fix, &g.sites, anchored).map(|f| (f, None));
             };
-            let all = self.verdicts(&at, ms, sites);
+            let all = self.verdicts(&at, &g.ms, &g.sites);
             let mut worst: Option<(usize, f64)> = None;
             for (k, v) in all.iter().enumerate() {
                 if v.outlier() && worst.is_none_or(|(_, s)| v.score() > s) {
@@ -127,12 +120,12 @@ impl Mlat {
                 }
             }
             let Some((k, _)) = worst else {
-                let judged = Judged::new(at, &all, sites);
-                return self.consistent(fix, sites, anchored).map(|f| (f, Some(judged)));
+                let judged = Judged::new(at, &all, &g.sites);
+                return self.consistent(fix, &g.sites, anchored).map(|f| (f, Some(judged)));
             };
-            let (m, site, var) = (ms.remove(k), sites.remove(k), sync_vars.remove(k));
+            let (m, site, var) = (g.ms.remove(k), g.sites.remove(k), g.sync_vars.remove(k));
             self.stats.outliers_dropped += 1;
-            dropped.push((m, site, var));
+            g.dropped.push((m, site, var));
             before = Some(fix);
         }
     }
@@ -164,20 +157,17 @@ impl Mlat {
     /// The last copy left out is put back: the fix with it stands.
     fn undrop(
         &mut self,
-        ms: &mut GroupVec<Measurement>,
-        sites: &mut GroupVec<Site>,
-        sync_vars: &mut GroupVec<f64>,
-        dropped: &mut Dropped,
+        g: &mut GroupCopies,
         fix: crate::mlat::solver::Fix,
         anchored: bool,
     ) -> Result<(crate::mlat::solver::Fix, Option<Judged>), Reject> {
-        if let Some((m, site, var)) = dropped.pop() {
+        if let Some((m, site, var)) = g.dropped.pop() {
             self.stats.outliers_dropped -= 1;
-            ms.push(m);
-            sites.push(site);
-            sync_vars.push(var);
+            g.ms.push(m);
+            g.sites.push(site);
+            g.sync_vars.push(var);
         }
-        self.consistent(fix, sites, anchored).map(|f| (f, None))
+        self.consistent(fix, &g.sites, anchored).map(|f| (f, None))
     }
 
     /// A fix whose residuals, once the outliers are out, are beyond what
@@ -297,27 +287,32 @@ fn early_copies(fix: &crate::mlat::solver::Fix, dropped: &Dropped) -> usize {
         .count()
 }
 
-/// The group `all` with copy `skip` left out: the rest as measurements,
-/// that one as the first dropped.
-fn split(
-    all: &Dropped,
-    skip: usize,
-    ms: &mut GroupVec<Measurement>,
-    sites: &mut GroupVec<Site>,
-    sync_vars: &mut GroupVec<f64>,
-    dropped: &mut Dropped,
-) {
-    ms.clear();
-    sites.clear();
-    sync_vars.clear();
-    dropped.clear();
-    for (k, (m, s, v)) in all.iter().enumerate() {
-        if k == skip {
-            dropped.push((*m, s.clone(), *v));
-        } else {
-            ms.push(*m);
-            sites.push(s.clone());
-            sync_vars.push(*v);
+/// A group's copies as the robust solve works on them: those in the fix
+/// (measurement, site, sync variance, in step) and those left out.
+#[derive(Clone)]
+pub(super) struct GroupCopies {
+    pub ms: GroupVec<Measurement>,
+    pub sites: GroupVec<Site>,
+    pub sync_vars: GroupVec<f64>,
+    pub dropped: Dropped,
+}
+
+impl GroupCopies {
+    /// The group `all` with copy `skip` left out: the rest in the fix,
+    /// that one the first dropped.
+    fn split(&mut self, all: &Dropped, skip: usize) {
+        self.ms.clear();
+        self.sites.clear();
+        self.sync_vars.clear();
+        self.dropped.clear();
+        for (k, (m, s, v)) in all.iter().enumerate() {
+            if k == skip {
+                self.dropped.push((*m, s.clone(), *v));
+            } else {
+                self.ms.push(*m);
+                self.sites.push(s.clone());
+                self.sync_vars.push(*v);
+            }
         }
     }
 }
