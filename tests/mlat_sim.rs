@@ -386,7 +386,7 @@ fn a_misplaced_gps_receiver_is_surveyed_from_the_traffic() {
     assert!((1.8..2.2).contains(&nees) && inside >= 0.93, "NEES {nees}, inside {inside}");
     // Fixes wrong by many of their sigmas (a Gaussian puts 1e-11 of them
     // beyond 50): a late copy of a precise receiver that misled the search
-    // for outliers into leaving out good copies made twice as many (0.08%).
+    // for outliers into leaving out good copies made twice as many.
     assert!(wild <= 0.0005, "{:.3}% of fixes beyond NEES 50", 100.0 * wild);
     assert!(core.mlat().stats.refixed > 0);
     // Every receiver but the misplaced one in use, and each one's timing
@@ -484,8 +484,8 @@ fn self_survey_puts_the_misplaced_receiver_where_it_is_and_learning_nears_the_or
     assert!(surveyed < 0.9 * declared, "{declared:.1} m declared, {surveyed:.1} m surveyed");
     assert!(surveyed <= 1.2 * known, "{surveyed:.1} m surveyed, {known:.1} m oracle");
     // Honest with the surveyed position in use: its uncertainty is in the
-    // copies' variance (without it, 2.18: the position in use metres off,
-    // every fix with the receiver pulled the same way).
+    // copies' variance (without it, the position in use metres off pulled
+    // every fix with the receiver the same way, unaccounted for).
     assert!((1.85..2.1).contains(&nees), "surveyed fixes' NEES {nees:.2}");
     // The oracle's own use of what it is told: not worse than learning.
     assert!(known < surveyed, "{surveyed:.1} m surveyed, {known:.1} m oracle");

@@ -122,8 +122,8 @@ impl Mlat {
         let target =
             r.survey.offset().filter(|o| o.misplaced()).map(|o| ([o.enu_m[0], o.enu_m[1]], o.sigma_m));
         // What the position in use may be off by goes into its copies'
-        // variance: left out, fixes with a surveyed receiver were
-        // overconfident on held-out worlds (NEES 2.04-2.16).
+        // variance: left out, every fix with a surveyed receiver claimed
+        // more than its position was known to.
         let spread = match (r.surveyed, target) {
             (Some(a), Some((t, sigma))) => {
                 (sigma * sigma + 0.5 * ((a[0] - t[0]).powi(2) + (a[1] - t[1]).powi(2))) / (C_AIR * C_AIR)
