@@ -48,9 +48,8 @@ pub use stats::{MlatStats, RejectCounts};
 /// receivers' own), and the sync variance summed over the copies, the share
 /// of it from the aircraft's own ADS-B, and all the copies' variance.
 struct Measured {
-    ms: GroupVec<Measurement>,
-    sites: GroupVec<Site>,
-    sync_vars: GroupVec<f64>,
+    /// The measurements, sites and sync variances (none left out yet).
+    g: robust::GroupCopies,
     sync_var: f64,
     self_var: f64,
     all_var: f64,
@@ -507,11 +506,10 @@ impl Mlat {
                 }
             }
         }
-        let Measured { ms, sites, sync_vars, sync_var, self_var, all_var } =
-            self.measurements(&copies, &times, info.addr);
+        let Measured { mut g, sync_var, self_var, all_var } = self.measurements(&copies, &times, info.addr);
         let (baro, alt) = self.altitude_constraint(&ac, now);
         let guess = ac.last_fix.filter(|(_, t)| (now - t).abs() < 30.0).map(|(p, _)| p);
-        let too_few = ms.len() < 3 || (ms.len() < 4 && alt.is_none());
+        let too_few = g.ms.len() < 3 || (g.ms.len() < 4 && alt.is_none());
         // Exactly as many measurements as unknowns: the equations have two
         // solutions (hyperboloids and the altitude's shell meet twice), both
         // fitting perfectly, and only an earlier fix with redundancy tells
@@ -520,13 +518,11 @@ impl Mlat {
         // covariance of metres (NEES in the hundreds of thousands), and so
         // were most of tma-busy's in its first seconds (only its GPS-timed
         // receivers synchronised yet).
-        let ambiguous = !too_few && ms.len() + alt.is_some() as usize == 4 && guess.is_none();
+        let ambiguous = !too_few && g.ms.len() + alt.is_some() as usize == 4 && guess.is_none();
         if too_few || ambiguous {
-            return self.short_of_fix(&info, &ms, &arrivals, too_few, now);
+            return self.short_of_fix(&info, &g.ms, &arrivals, too_few, now);
         }
-        let mut g = robust::GroupCopies { ms, sites, sync_vars, dropped: Dropped::new() };
         let solved = self.solve_robust(&mut g, alt, guess);
-        let robust::GroupCopies { ms, sites, sync_vars, dropped } = g;
         let (fix, judged) = match solved {
             Ok(f) => f,
             Err(why) => {
@@ -536,23 +532,24 @@ impl Mlat {
         };
         // Hedged against late copies, judged at the fix (as the robust
         // solve already did when its last round found no outlier).
-        let judged = judged.or_else(|| (fix.dof > 0).then(|| self.judge(&ms, &sites, alt, &fix)).flatten());
+        let judged =
+            judged.or_else(|| (fix.dof > 0).then(|| self.judge(&g.ms, &g.sites, alt, &fix)).flatten());
         let fix = match &judged {
             Some(j) => super::solver::hedge(&fix, &j.at, |k| j.p_late(k)),
             None => fix,
         };
-        let used: smallvec::SmallVec<[usize; 8]> = sites.iter().flatten().copied().collect();
+        let used: smallvec::SmallVec<[usize; 8]> = g.sites.iter().flatten().copied().collect();
         if !info.addr_known && fix.dof == 0 {
             // Nothing checks an unverified address: no fix from it.
             self.stats.unverified_address += 1;
             return GroupOutcome::NoFix(NoFix::UnverifiedAddress);
         }
         if let Some(j) = judged.as_ref().filter(|_| self.cfg.calibrate && fix.dof >= 1) {
-            self.learn(j, &fix, &sites, &sync_vars, &dropped, now);
+            self.learn(j, &fix, &g.sites, &g.sync_vars, &g.dropped, now);
         }
         self.remember_fix(info.addr, &fix, judged.as_ref().map(|j| &j.at), (alt, baro), now);
         self.stats.fixes += 1;
-        let t = self.emission_time(copies[root].rx, &fix, &arrivals, &ms);
+        let t = self.emission_time(copies[root].rx, &fix, &arrivals, &g.ms);
         let self_sync_share = if sync_var > 0.0 { self_var / sync_var } else { 0.0 };
         self.stats.self_synced_fixes += (self_sync_share > 0.5) as u64;
         GroupOutcome::Fix(Box::new(MlatFix {
@@ -818,7 +815,12 @@ impl Mlat {
                 }
             }
         }
-        Measured { ms, sites, sync_vars, sync_var, self_var, all_var }
+        Measured {
+            g: robust::GroupCopies { ms, sites, sync_vars, dropped: Dropped::new() },
+            sync_var,
+            self_var,
+            all_var,
+        }
     }
 
     fn note_jump(&mut self, rx: usize, jumped: bool) {
