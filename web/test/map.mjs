@@ -111,8 +111,10 @@ try {
   // Zoomed in, every aircraft with a position and a covariance gets its
   // 95% ellipse; zoomed out, none.
   // The count and the document it was drawn from, on the same refresh.
+  // Up to 15 s: on a loaded machine the page's refresh can trail the
+  // server's for seconds, and 4 s once missed every matching moment.
   const ellipses = async () => {
-    for (let i = 0; i < 40; i++) {
+    for (let i = 0; i < 150; i++) {
       const e = await page.evaluate(async () => {
         const now = document.body.dataset.now;
         const drawn = Number(document.body.dataset.ellipses);
