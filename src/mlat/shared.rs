@@ -99,20 +99,18 @@ pub enum Applied {
 pub struct SharedClock {
     pub sync: ClockSync,
     pub timing: Vec<TimingModel>,
-    clocks: Vec<ClockKind>,
     last_reset: Vec<f64>,
 }
 
 impl SharedClock {
     pub fn new(sync: ClockSync) -> Self {
-        SharedClock { sync, timing: Vec::new(), clocks: Vec::new(), last_reset: Vec::new() }
+        SharedClock { sync, timing: Vec::new(), last_reset: Vec::new() }
     }
 
     /// A receiver, its timing model starting from `prior` (the configured jitter's).
     pub fn add_receiver(&mut self, clock: ClockKind, id: &str, prior: TimingModel) {
         self.sync.add_receiver(clock, id);
         self.timing.push(prior);
-        self.clocks.push(clock);
         self.last_reset.push(f64::NEG_INFINITY);
     }
 
@@ -120,12 +118,12 @@ impl SharedClock {
     /// timing models say (the workers' position surveys are not here).
     pub fn receiver_reports(&self, t: f64) -> Vec<crate::mlat::ReceiverReport> {
         use crate::mlat::engine::{gps_mean_offset, timing_report};
-        let gps_mean = gps_mean_offset(self.clocks.iter().copied().zip(&self.timing));
+        let gps_mean = gps_mean_offset(self.sync.clocks.iter().copied().zip(&self.timing));
         (0..self.receivers())
             .map(|rx| {
                 let h = &self.sync.health[rx];
                 let reason = h.excluded.then_some(crate::mlat::Exclusion::SyncFailing);
-                timing_report(rx, t, reason, h, self.clocks[rx], &self.timing[rx], gps_mean)
+                timing_report(rx, t, reason, h, self.sync.clocks[rx], &self.timing[rx], gps_mean)
             })
             .collect()
     }
