@@ -1,29 +1,23 @@
 //! fuse1090: a real-time ADS-B / Mode S receive-and-fuse daemon.
 //!
-//! Data flows one way through the stages, each a module:
-//! [`feed`] (bytes → frames) → [`modes`] (frames → decoded messages) → mlat,
-//! track → fuse → publish. The processing core is sans-IO: time is passed in,
-//! never read from the system clock, so every stage can be driven by recorded
-//! data and tested against truth.
+//! Three crates show the layers:
+//! - `fuse1090-core` (`crates/core`): the sans-IO processing core, from
+//!   framing to the output encoders. Data flows one way through its
+//!   modules: [`feed`] (bytes → frames) → [`modes`] (frames → decoded
+//!   messages) → [`mlat`], [`track`] → [`fuse`] → [`publish`], driven by
+//!   [`core`]'s two stages. Time is passed in, never read, so every stage
+//!   can be driven by recorded data and tested against truth.
+//! - `fuse1090-sim` (`crates/sim`): the simulator and the evaluator.
+//! - this crate, the daemon and the CLI: sockets, HTTP, NATS, signals and
+//!   files around the core ([`live`], [`cluster`], [`cmd`], [`config`]).
+//!
+//! The core's and the simulator's modules are re-exported here, so
+//! `fuse1090::mlat::Mlat` and `fuse1090_core::mlat::Mlat` are one type.
 
 pub mod cluster;
 pub mod cmd;
 pub mod config;
-pub mod core;
-pub mod eval;
-pub mod feed;
-pub mod fuse;
-pub mod geo;
 pub mod live;
-pub mod mlat;
-pub mod modes;
-pub mod publish;
-pub mod sim;
-pub mod track;
 
-/// The hash map of the per-frame and per-measurement paths: foldhash, seeded
-/// per process like the standard one (so nothing can depend on an iteration
-/// order) but a fraction of SipHash's cost, which was 6% of all instructions
-/// of `run --capture` on the scale world (five lookups a frame: receiver,
-/// group, decoder, MLAT and tracker state).
-pub type FastMap<K, V> = std::collections::HashMap<K, V, foldhash::fast::RandomState>;
+pub use fuse1090_core::{core, feed, fuse, geo, mlat, modes, publish, track, FastMap};
+pub use fuse1090_sim::{eval, sim};

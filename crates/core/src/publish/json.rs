@@ -302,7 +302,7 @@ pub fn alert_record(a: &Alert) -> serde_json::Value {
 }
 
 /// `v` rounded to a multiple of `1 / k`: what a published number can mean.
-pub(crate) fn round(v: f64, k: f64) -> f64 {
+pub fn round(v: f64, k: f64) -> f64 {
     (v * k).round() / k
 }
 

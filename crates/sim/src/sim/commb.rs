@@ -8,9 +8,9 @@
 //! beyond that and the register's age (the caller's).
 
 use super::trajectory::{Sample, Trajectory};
-use crate::geo::{FT_TO_M, KT_TO_MS};
-use crate::modes::commb::registers::{Bds40, Bds50, Bds60};
-use crate::modes::commb::{air, encode, Bds};
+use fuse1090_core::geo::{FT_TO_M, KT_TO_MS};
+use fuse1090_core::modes::commb::registers::{Bds40, Bds50, Bds60};
+use fuse1090_core::modes::commb::{air, encode, Bds};
 
 fn track_deg(s: &Sample) -> f64 {
     s.vel[0].atan2(s.vel[1]).to_degrees().rem_euclid(360.0)

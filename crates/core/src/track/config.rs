@@ -348,12 +348,20 @@ impl TrackConfig {
 mod tests {
     use super::*;
 
+    /// The `[core]` table of a configuration file (its other tables are
+    /// the daemon's, and ignored here).
+    fn core_of(text: &str) -> crate::core::CoreConfig {
+        #[derive(serde::Deserialize)]
+        struct File {
+            #[serde(default)]
+            core: crate::core::CoreConfig,
+        }
+        toml::from_str::<File>(text).unwrap().core
+    }
+
     #[test]
     fn the_benchmark_model_set_loads_and_bad_models_are_each_named() {
-        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-        let cfg =
-            crate::config::Config::load(&root.join("fixtures/configs/benchmark-accelerations.toml")).unwrap();
-        let t = &cfg.core.track;
+        let t = &core_of(include_str!("../../../../fixtures/configs/benchmark-accelerations.toml")).track;
         assert!(t.models.contains(&ModelConfig::Ta { accel: -3.0, q: 0.05 }), "{:?}", t.models);
         assert_eq!(t.imm_spec().models.len(), 5);
         let bad = TrackConfig {
@@ -368,7 +376,7 @@ mod tests {
     #[test]
     fn the_mlat_only_matrix_is_checked_and_can_be_turned_off() {
         let text = "[core.track]\nmlat_only = { stay_first = 0.5, to_first = 0.9 }\n";
-        let err = crate::config::Config::parse(text, "t.toml").unwrap_err().to_string();
+        let err = core_of(text).validate().unwrap_err();
         assert!(err.contains("mlat_only: stay_first = 0.5 and to_first = 0.9"), "{err}");
         let off = TrackConfig {
             mlat_only: MlatOnlyConfig { enabled: false, ..Default::default() },

@@ -23,10 +23,10 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
-use crate::feed::capture::{CaptureWriter, ReceiverDecl};
-use crate::feed::RawFrame;
-use crate::geo::{displace, ecef_distance, geodetic_to_ecef};
 use clock::ClockModel;
+use fuse1090_core::feed::capture::{CaptureWriter, ReceiverDecl};
+use fuse1090_core::feed::RawFrame;
+use fuse1090_core::geo::{displace, ecef_distance, geodetic_to_ecef};
 use scenario::{Aircraft, Receiver, Scenario, Segment, StartState};
 use trajectory::{Trajectory, STEP_S};
 use transmit::Transmitter;
@@ -84,9 +84,9 @@ pub fn all_receivers(s: &Scenario) -> Vec<Receiver> {
                 lon,
                 alt_m: r.gen_range(20.0..400.0),
                 clock: if gps {
-                    crate::feed::capture::ClockKind::Gps
+                    fuse1090_core::feed::capture::ClockKind::Gps
                 } else {
-                    crate::feed::capture::ClockKind::Beast12
+                    fuse1090_core::feed::capture::ClockKind::Beast12
                 },
                 clock_offset_s: None,
                 drift_ppm: if gps { 0.0 } else { r.gen_range(-f.max_drift_ppm..=f.max_drift_ppm) },
@@ -208,8 +208,8 @@ pub fn oracle_config(s: &Scenario) -> String {
         // The timestamps' rounding is noise too: a counter's 12 MHz tick,
         // a GPS time's nanosecond. A counter's constant offset is its clock's.
         let (tick_s, offset_ns) = match r.clock {
-            crate::feed::capture::ClockKind::Beast12 => (1.0 / 12e6, 0.0),
-            crate::feed::capture::ClockKind::Gps => (1e-9, r.bias_ns),
+            fuse1090_core::feed::capture::ClockKind::Beast12 => (1.0 / 12e6, 0.0),
+            fuse1090_core::feed::capture::ClockKind::Gps => (1e-9, r.bias_ns),
         };
         let sigma_ns = ((r.jitter_ns * 1e-9).powi(2) + tick_s * tick_s / 12.0).sqrt() * 1e9;
         let _ = write!(

@@ -11,7 +11,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
 use super::scenario::Receiver;
-use crate::feed::capture::ClockKind;
+use fuse1090_core::feed::capture::ClockKind;
 
 pub struct ClockModel {
     kind: ClockKind,

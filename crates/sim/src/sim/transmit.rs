@@ -12,14 +12,14 @@ use rand_distr::StandardNormal;
 
 use super::scenario::Aircraft;
 use super::trajectory::{Sample, Trajectory};
-use crate::geo::{displace, FT_TO_M};
-use crate::modes::commb::Bds;
-use crate::modes::cpr::encode as cpr_encode;
-use crate::modes::encode::{
+use fuse1090_core::geo::{displace, FT_TO_M};
+use fuse1090_core::modes::commb::Bds;
+use fuse1090_core::modes::cpr::encode as cpr_encode;
+use fuse1090_core::modes::encode::{
     ac13_q, df11, df17, id13, me_airborne_position, me_identification, me_operational_status,
     me_surface_position, me_target_state, me_velocity, movement_code, surveillance_reply,
 };
-use crate::modes::nic::{nacp_epu_m, nacv_bounds, R95_PER_SIGMA};
+use fuse1090_core::modes::nic::{nacp_epu_m, nacv_bounds, R95_PER_SIGMA};
 
 const MS_TO_KT: f64 = 3600.0 / 1852.0;
 
@@ -229,7 +229,7 @@ impl Transmitter {
         }
         // A transponder answers from its register, which the avionics refresh
         // every 1.3 s at the most (ICAO Doc 9871): the values are up to that old.
-        let lag_s = self.rng.gen_range(0.0..crate::modes::commb::REFRESH_S);
+        let lag_s = self.rng.gen_range(0.0..fuse1090_core::modes::commb::REFRESH_S);
         let filled = super::commb::register(bds, traj, t - lag_s, self.baro_offset_m);
         // Just after the aircraft appeared, its state now.
         filled.or_else(|| super::commb::register(bds, traj, t, self.baro_offset_m)).unwrap_or(0)

@@ -142,7 +142,7 @@ impl FeedStats {
 }
 
 /// `n` distinct Mode S short frames (DF11), timestamps 0..n, for tests.
-#[cfg(test)]
+#[cfg(any(test, feature = "test-support"))]
 pub fn test_frames(n: usize) -> Vec<RawFrame> {
     (0..n).map(|i| RawFrame::new(&[0x5d, 0x4b, 0x1a, 0x2b, 0, 0, i as u8], i as u64, 0).unwrap()).collect()
 }

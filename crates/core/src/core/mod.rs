@@ -138,7 +138,8 @@ pub enum Event {
     Receiver(Box<crate::mlat::ReceiverReport>),
 }
 
-pub(crate) fn event(o: Output) -> Event {
+/// The fuser's output as the core's event.
+pub fn event(o: Output) -> Event {
     match o {
         Output::Track(r) => Event::Track(r),
         Output::Alert(a) => Event::Alert(a),

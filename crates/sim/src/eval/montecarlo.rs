@@ -26,11 +26,11 @@ use serde::Serialize;
 use statrs::distribution::{ContinuousCDF, StudentsT};
 
 use super::{evaluate, nees_band, Truth};
-use crate::core::{Core, CoreConfig};
-use crate::feed::capture::CaptureReader;
-use crate::fuse::Method;
-use crate::publish::json::write_event;
 use crate::sim::scenario::Scenario;
+use fuse1090_core::core::{Core, CoreConfig};
+use fuse1090_core::feed::capture::CaptureReader;
+use fuse1090_core::fuse::Method;
+use fuse1090_core::publish::json::write_event;
 
 /// One pooled row: a source (`fused/<method>`, `adsb`, `mlat`, ...).
 #[derive(Clone, Debug, Default, Serialize)]

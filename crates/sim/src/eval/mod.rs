@@ -109,7 +109,7 @@ impl Truth {
 /// East/north offset (m) of (lat, lon) from a point.
 fn en_offset(from: &TruthPoint, lat: f64, lon: f64) -> [f64; 2] {
     let p = from.lat.to_radians();
-    let (m, n) = crate::geo::radii(p);
+    let (m, n) = fuse1090_core::geo::radii(p);
     let dlon = ((lon - from.lon + 540.0).rem_euclid(360.0)) - 180.0;
     [dlon.to_radians() * (n + from.alt) * p.cos(), (lat - from.lat).to_radians() * (m + from.alt)]
 }
@@ -147,7 +147,7 @@ pub struct Geometry {
 
 impl Geometry {
     pub fn from_scenario(s: &crate::sim::scenario::Scenario, alt_sigma_m: f64) -> Geometry {
-        use crate::feed::capture::ClockKind;
+        use fuse1090_core::feed::capture::ClockKind;
         let receivers = crate::sim::all_receivers(s)
             .into_iter()
             .map(|r| {
@@ -156,7 +156,7 @@ impl Geometry {
                     ClockKind::Gps => 1e-9,
                 };
                 let sigma = ((r.jitter_ns * 1e-9).powi(2) + tick * tick / 12.0).sqrt();
-                (r.id.clone(), (crate::geo::geodetic_to_ecef(r.lat, r.lon, r.alt_m), sigma))
+                (r.id.clone(), (fuse1090_core::geo::geodetic_to_ecef(r.lat, r.lon, r.alt_m), sigma))
             })
             .collect();
         Geometry { receivers, alt_sigma_m }
@@ -368,8 +368,8 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
             let (pos, sig): (Vec<[f64; 3]>, Vec<f64>) =
                 ids.iter().filter_map(|id| g.receivers.get(id.as_str()?)).copied().unzip();
             let alt = v["altitude_used"].as_bool().unwrap_or(false).then_some(g.alt_sigma_m);
-            let truth_ecef = crate::geo::geodetic_to_ecef(tp.lat, tp.lon, tp.alt);
-            if let Some(c) = crate::mlat::solver::crb_en(&pos, &sig, alt, truth_ecef) {
+            let truth_ecef = fuse1090_core::geo::geodetic_to_ecef(tp.lat, tp.lon, tp.alt);
+            if let Some(c) = fuse1090_core::mlat::solver::crb_en(&pos, &sig, alt, truth_ecef) {
                 acc.crb.push(c[0][0] + c[1][1]);
             }
         }

@@ -11,9 +11,10 @@ pub mod json;
 pub mod readout;
 pub mod sbs;
 
-/// A fused track to render in the publishers' tests.
-#[cfg(test)]
-pub(crate) mod test_report {
+/// A fused track to render in the publishers' tests (and the cluster
+/// publisher's, through the `test-support` feature).
+#[cfg(any(test, feature = "test-support"))]
+pub mod test_report {
     use std::sync::Arc;
 
     use crate::fuse::{Sources, TrackReport};

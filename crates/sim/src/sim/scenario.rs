@@ -7,11 +7,11 @@
 
 use std::path::Path;
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Deserializer};
 
-use crate::feed::capture::ClockKind;
-use crate::modes::commb::Bds;
+use fuse1090_core::feed::capture::ClockKind;
+use fuse1090_core::modes::commb::Bds;
 
 fn checked<'de, D: Deserializer<'de>>(d: D, ok: impl Fn(f64) -> bool, what: &str) -> Result<f64, D::Error> {
     let v = f64::deserialize(d)?;
@@ -340,13 +340,14 @@ pub struct Traffic {
 
 impl Scenario {
     pub fn load(path: &Path) -> Result<Scenario> {
-        let (s, name): (Scenario, String) = crate::config::load_toml(path)?;
-        s.validate().map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
-        Ok(s)
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+        Scenario::parse(&text, &path.display().to_string())
     }
 
+    /// Parses and checks a scenario, errors prefixed with `name`.
     pub fn parse(text: &str, name: &str) -> Result<Scenario> {
-        let s: Scenario = crate::config::parse_toml(text, name)?;
+        let s: Scenario = toml::from_str(text).map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
         s.validate().map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
         Ok(s)
     }

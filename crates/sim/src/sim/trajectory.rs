@@ -4,7 +4,7 @@
 //! flights are accurate anywhere on Earth except within metres of a pole.
 
 use super::scenario::{Segment, StartState};
-use crate::geo::radii;
+use fuse1090_core::geo::radii;
 
 pub const STEP_S: f64 = 0.1;
 
@@ -115,7 +115,7 @@ impl Trajectory {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geo::distance_m;
+    use fuse1090_core::geo::distance_m;
 
     fn start(lat: f64, lon: f64, heading: f64) -> StartState {
         StartState { lat, lon, alt_m: 3000.0, speed_mps: 120.0, heading_deg: heading, vrate_mps: 0.0 }
