@@ -289,8 +289,10 @@ impl Front {
         };
         self.advance(arrival, cmds);
         let (grouper, mut ctx) = self.ctx();
-        match grouper.add(rx, arrival, frame, emission, &mut |g: &Group| ctx.on_group(g, arrival, cmds)) {
-            Added::New => {}
+        let new = match grouper
+            .add(rx, arrival, frame, emission, &mut |g: &Group| ctx.on_group(g, arrival, cmds))
+        {
+            Added::New(new) => new,
             Added::Joined => return,
             Added::Duplicate => {
                 self.stats.duplicates += 1;
@@ -301,9 +303,14 @@ impl Front {
                 self.receivers[rx].late_copies += 1;
                 return;
             }
-        }
+        };
+        // The group is started below with what its first copy teaches. The
+        // copy is decoded here, in place: returning the decoded message and
+        // its group's information from a function of their own copied them,
+        // a measurable cost on every new transmission.
         let decl = &self.receivers[rx].decl;
         let Ok(d) = self.decoder.decode_at(frame, arrival, Some((decl.lat, decl.lon))) else {
+            self.grouper.start(new, GroupInfo::default());
             return;
         };
         self.stats.messages += 1;
@@ -351,7 +358,7 @@ impl Front {
                 }
             }
         }
-        self.grouper.set_newest_info(info);
+        self.grouper.start(new, info);
         if let Some(p) = report {
             // The report goes out before what the tracker makes of it.
             self.stats.positions += 1;

@@ -83,16 +83,29 @@ pub struct GroupStats {
 }
 
 /// What happened to a frame.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Debug, PartialEq)]
+#[must_use]
 pub enum Added {
-    /// First copy: a new transmission.
-    New,
+    /// First copy: a new transmission, to decode and then [`Grouper::start`]
+    /// with what decoding taught.
+    New(NewGroup),
     /// Joined a pending group.
     Joined,
     /// Same receiver, same bytes, still pending: dropped.
     Duplicate,
     /// A copy of a transmission already handed out: dropped.
     Late,
+}
+
+/// A transmission's first copy, waiting for its decoded information to
+/// become a group: the group is made whole, so nothing updates it after.
+#[derive(Debug, PartialEq)]
+#[must_use = "a new transmission becomes a group only when started"]
+pub struct NewGroup {
+    copy: Copy,
+    frame: RawFrame,
+    key: u128,
+    emission: f64,
 }
 
 pub struct Grouper {
@@ -199,29 +212,32 @@ impl Grouper {
             self.stats.late_copies += 1;
             return Added::Late;
         }
+        // Room is made before the caller decodes: the group handed out
+        // for it is processed before anything this copy teaches.
         if self.queue.groups.len() >= self.max_pending {
             self.stats.overflow += 1;
             self.pop_front(done);
         }
+        Added::New(NewGroup { copy, frame: *frame, key: k, emission })
+    }
+
+    /// Makes the group of a transmission `add` found new, with what
+    /// decoding its first copy taught (the default when it did not decode).
+    /// Inlined: it is on every new transmission's path.
+    #[inline(always)]
+    pub fn start(&mut self, new: NewGroup, info: GroupInfo) {
+        let NewGroup { copy, frame, key, emission } = new;
         self.stats.groups += 1;
         let q = &mut self.queue;
         q.groups.push_back(Group {
-            frame: *frame,
-            first_arrival: arrival,
+            frame,
+            first_arrival: copy.arrival,
             emission,
             copies: smallvec![copy],
-            info: GroupInfo::default(),
+            info,
         });
         let seq = q.base.wrapping_add(q.groups.len() as u32 - 1);
-        self.pending.insert(k, seq, q);
-        Added::New
-    }
-
-    /// Records what decoding taught about the transmission just added as `New`.
-    pub fn set_newest_info(&mut self, info: GroupInfo) {
-        if let Some(g) = self.queue.groups.back_mut() {
-            g.info = info;
-        }
+        self.pending.insert(key, seq, q);
     }
 
     /// Hands out every group whose wait has run out by `now`.
@@ -260,6 +276,34 @@ mod tests {
         crate::feed::frame_from_hex(hex, 5, 1).unwrap()
     }
 
+    /// What `add` did, a new transmission started without decoded information.
+    #[derive(Debug, PartialEq)]
+    enum Seen {
+        New,
+        Joined,
+        Duplicate,
+        Late,
+    }
+
+    fn add(
+        g: &mut Grouper,
+        rx: usize,
+        arrival: f64,
+        frame: &RawFrame,
+        emission: f64,
+        out: &mut Vec<Group>,
+    ) -> Seen {
+        match g.add(rx, arrival, frame, emission, &mut keep(out)) {
+            Added::New(n) => {
+                g.start(n, GroupInfo::default());
+                Seen::New
+            }
+            Added::Joined => Seen::Joined,
+            Added::Duplicate => Seen::Duplicate,
+            Added::Late => Seen::Late,
+        }
+    }
+
     /// A receiver of handed-out groups that keeps copies of them.
     fn keep(out: &mut Vec<Group>) -> impl FnMut(&Group) + '_ {
         |g| out.push(g.clone())
@@ -270,13 +314,13 @@ mod tests {
         let mut g = Grouper::new(0.2, 100);
         let mut out = Vec::new();
         let a = f("8D4840D6202CC371C32CE0576098");
-        assert_eq!(g.add(0, 10.0, &a, f64::NAN, &mut keep(&mut out)), Added::New);
-        assert_eq!(g.add(1, 10.05, &a, f64::NAN, &mut keep(&mut out)), Added::Joined);
-        assert_eq!(g.add(1, 10.06, &a, f64::NAN, &mut keep(&mut out)), Added::Duplicate);
+        assert_eq!(add(&mut g, 0, 10.0, &a, f64::NAN, &mut out), Seen::New);
+        assert_eq!(add(&mut g, 1, 10.05, &a, f64::NAN, &mut out), Seen::Joined);
+        assert_eq!(add(&mut g, 1, 10.06, &a, f64::NAN, &mut out), Seen::Duplicate);
         // Same bytes from a receiver already in the group, at another time: a new transmission.
         let later = crate::feed::frame_from_hex("8D4840D6202CC371C32CE0576098", 99, 1).unwrap();
-        assert_eq!(g.add(1, 10.07, &later, f64::NAN, &mut keep(&mut out)), Added::New);
-        assert_eq!(g.add(2, 10.1, &f("5D4840D61F3A2B"), f64::NAN, &mut keep(&mut out)), Added::New);
+        assert_eq!(add(&mut g, 1, 10.07, &later, f64::NAN, &mut out), Seen::New);
+        assert_eq!(add(&mut g, 2, 10.1, &f("5D4840D61F3A2B"), f64::NAN, &mut out), Seen::New);
         g.advance(10.19, &mut keep(&mut out));
         assert!(out.is_empty());
         g.advance(10.2, &mut keep(&mut out));
@@ -284,7 +328,7 @@ mod tests {
         assert_eq!(out[0].copies.len(), 2);
         // The same bytes after the wait are a new transmission.
         g.advance(10.7, &mut keep(&mut out));
-        assert_eq!(g.add(0, 10.7, &a, f64::NAN, &mut keep(&mut out)), Added::New);
+        assert_eq!(add(&mut g, 0, 10.7, &a, f64::NAN, &mut out), Seen::New);
         g.flush(&mut keep(&mut out));
         assert_eq!(out.len(), 4);
         assert_eq!(g.stats().duplicate_copies, 1);
@@ -298,23 +342,23 @@ mod tests {
         // Sent at 10.00 s (on the server's clock, as each copy's receiver
         // puts it there): rx0 and rx1 on time, rx2 0.8 s late (its link's
         // burst), over a link whose least delay is 60 ms longer.
-        assert_eq!(g.add(0, 10.04, &a, 10.0, &mut keep(&mut out)), Added::New);
-        assert_eq!(g.add(1, 10.05, &a, 10.01, &mut keep(&mut out)), Added::Joined);
+        assert_eq!(add(&mut g, 0, 10.04, &a, 10.0, &mut out), Seen::New);
+        assert_eq!(add(&mut g, 1, 10.05, &a, 10.01, &mut out), Seen::Joined);
         g.advance(10.6, &mut keep(&mut out));
         assert_eq!(out.len(), 1);
-        assert_eq!(g.add(2, 10.9, &a, 10.06, &mut keep(&mut out)), Added::Late);
+        assert_eq!(add(&mut g, 2, 10.9, &a, 10.06, &mut out), Seen::Late);
         // The same bytes sent again 0.5 s later (a steady velocity message):
         // a transmission of its own, from every receiver.
-        assert_eq!(g.add(2, 10.95, &a, 10.5, &mut keep(&mut out)), Added::New);
+        assert_eq!(add(&mut g, 2, 10.95, &a, 10.5, &mut out), Seen::New);
         // rx1's copy of the repeat is late too, but it is not the first
         // transmission's: it joins the repeat's pending group.
-        assert_eq!(g.add(1, 11.05, &a, 10.51, &mut keep(&mut out)), Added::Joined);
+        assert_eq!(add(&mut g, 1, 11.05, &a, 10.51, &mut out), Seen::Joined);
         // A late copy of the first transmission that finds the repeat
         // pending is still late, not a copy of the repeat.
-        assert_eq!(g.add(3, 11.1, &a, 10.02, &mut keep(&mut out)), Added::Late);
+        assert_eq!(add(&mut g, 3, 11.1, &a, 10.02, &mut out), Seen::Late);
         // A copy whose receiver cannot say when it was sent: new.
         g.advance(11.5, &mut keep(&mut out));
-        assert_eq!(g.add(4, 11.6, &a, f64::NAN, &mut keep(&mut out)), Added::New);
+        assert_eq!(add(&mut g, 4, 11.6, &a, f64::NAN, &mut out), Seen::New);
         assert_eq!(g.stats().late_copies, 2);
         assert_eq!(g.stats().groups, 3);
     }
@@ -324,11 +368,11 @@ mod tests {
         let mut g = Grouper::new(1.0, 2);
         let mut out = Vec::new();
         for (i, hex) in ["5D4840D61F3A2B", "5D4840D61F3A2C", "5D4840D61F3A2D"].iter().enumerate() {
-            g.add(0, i as f64 * 0.01, &f(hex), f64::NAN, &mut keep(&mut out));
+            add(&mut g, 0, i as f64 * 0.01, &f(hex), f64::NAN, &mut out);
         }
         assert_eq!(out.len(), 1);
         assert_eq!(g.stats().overflow, 1);
         // The evicted group's key is gone: its bytes start a new group.
-        assert_eq!(g.add(1, 0.05, &f("5D4840D61F3A2B"), f64::NAN, &mut keep(&mut out)), Added::New);
+        assert_eq!(add(&mut g, 1, 0.05, &f("5D4840D61F3A2B"), f64::NAN, &mut out), Seen::New);
     }
 }
