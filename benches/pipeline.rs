@@ -44,19 +44,18 @@ fn bench(c: &mut Criterion) {
     g.bench_function("core", |b| {
         b.iter(|| {
             let mut core = Core::new(&CoreConfig::default());
-            let mut events = Vec::new();
             for r in &records {
                 match r {
                     CaptureRecord::Receiver(d) => {
-                        core.add_receiver(d.clone());
+                        core.handle_receiver(d.clone());
                     }
                     CaptureRecord::Frame(f) => {
-                        core.on_frame(f.rx, f.arrival, &f.frame, &mut events);
-                        events.clear();
+                        core.handle_frame(f.arrival, f.rx, &f.frame);
+                        while core.poll_event().is_some() {}
                     }
                 }
             }
-            core.finish(&mut events);
+            core.finish();
             core.stats().positions
         })
     });

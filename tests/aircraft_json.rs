@@ -63,7 +63,8 @@ fn check(name: &str, h_tol_m: f64) -> Checked {
             CaptureRecord::Frame(f) => Some(f.arrival),
             CaptureRecord::Receiver(_) => None,
         };
-        core.on_record(rec, &mut events);
+        core.handle_record(rec);
+        events.extend(std::iter::from_fn(|| core.poll_event()));
         let Some(now) = now else { continue };
         view.observe(&events, now);
         events.clear();

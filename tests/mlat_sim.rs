@@ -50,7 +50,7 @@ fn beast12_clocks_synchronise_and_fixes_reach_the_cramer_rao_bound() {
         match rec {
             CaptureRecord::Receiver(d) => {
                 rxs.push(d.clone());
-                core.add_receiver(d);
+                core.handle_receiver(d);
             }
             CaptureRecord::Frame(f) => {
                 if !checked_at_30 && f.arrival >= scenario.start_unix + 30.0 {
@@ -59,11 +59,13 @@ fn beast12_clocks_synchronise_and_fixes_reach_the_cramer_rao_bound() {
                     let valid = sync.pairs().filter(|(_, p)| p.valid(f.arrival, &sync.params)).count();
                     assert_eq!(valid, 15, "all 15 pairs of 6 receivers synchronised within 30 s");
                 }
-                core.on_frame(f.rx, f.arrival, &f.frame, &mut events);
+                core.handle_frame(f.arrival, f.rx, &f.frame);
+                events.extend(std::iter::from_fn(|| core.poll_event()));
             }
         }
     }
-    core.finish(&mut events);
+    core.finish();
+    events.extend(std::iter::from_fn(|| core.poll_event()));
     let sync = &core.mlat().sync;
     for (&(i, j), p) in sync.pairs() {
         let ratio = p.residual_rms() / p.expected_rms();

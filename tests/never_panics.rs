@@ -96,16 +96,16 @@ mod capture_and_mlat {
             let text = lines.join("\n");
             let mut reader = CaptureReader::new(text.as_bytes(), "random");
             let mut core = Core::new(&CoreConfig::default());
-            let mut events = Vec::new();
             while let Some(rec) = reader.next_record().unwrap() {
                 match rec {
                     CaptureRecord::Receiver(d) => {
-                        core.add_receiver(d);
+                        core.handle_receiver(d);
                     }
-                    CaptureRecord::Frame(f) => core.on_frame(f.rx, f.arrival, &f.frame, &mut events),
+                    CaptureRecord::Frame(f) => core.handle_frame(f.arrival, f.rx, &f.frame),
                 }
             }
-            core.finish(&mut events);
+            core.finish();
+            let events: Vec<Event> = std::iter::from_fn(|| core.poll_event()).collect();
             // Random timestamps are never geometrically consistent: no fix.
             let fixes = events.iter().filter(|e| matches!(e, Event::Mlat(_))).count();
             prop_assert_eq!(fixes, 0);

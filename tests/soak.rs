@@ -49,7 +49,6 @@ fn soak(periods: usize, period_s: f64, per_period: usize, segment_s: f64) -> Vec
     let segments_per_hour = (period_s / segment_s).round() as usize;
     let per_segment = per_period / segments_per_hour;
     let start = 1_700_000_000.0;
-    let mut events = Vec::new();
     let mut hourly = Vec::new();
     for k in 0..periods * segments_per_hour {
         let s = segment(
@@ -67,8 +66,8 @@ fn soak(periods: usize, period_s: f64, per_period: usize, segment_s: f64) -> Vec
             if k > 0 && matches!(rec, CaptureRecord::Receiver(_)) {
                 continue;
             }
-            core.on_record(rec, &mut events);
-            events.clear();
+            core.handle_record(rec);
+            while core.poll_event().is_some() {}
         }
         if (k + 1) % segments_per_hour == 0 {
             hourly.push((

@@ -136,7 +136,7 @@ impl Processor {
             ToCore::Clock(s) => self.latest = Some(s),
             ToCore::Receiver(d) => {
                 for part in self.parts.values_mut() {
-                    part.core.add_receiver(d.clone());
+                    part.core.handle_receiver(d.clone());
                 }
                 self.receivers.push(d);
             }
@@ -146,7 +146,7 @@ impl Processor {
                 core.fuser_mut().number_tracks(p as u64 + 1, self.cfg.partitions as u64);
                 core.fuser_mut().keep_track_numbers(&cp.ids, cp.next_id);
                 for d in &self.receivers {
-                    core.add_receiver(d.clone());
+                    core.handle_receiver(d.clone());
                 }
                 if let Some(s) = &self.loaded {
                     core.mlat_mut().load_sync(s);
@@ -230,17 +230,18 @@ impl Processor {
         let frames_before = self.stats.frames;
         let mut events = Vec::new();
         let core = &mut part.core;
-        match read_batch(&b.msg.payload, |f| core.on_frame(f.rx, f.arrival, &f.frame, &mut events)) {
+        match read_batch(&b.msg.payload, |f| core.handle_frame(f.arrival, f.rx, &f.frame)) {
             Ok(n) => self.stats.frames += n as u64,
             Err(e) => {
                 self.stats.bad_batches += 1;
                 tracing::warn!(partition = p, error = %e, "frame batch skipped (the frames before the fault were used)");
             }
         }
-        part.core.advance(b.t, &mut events);
+        part.core.handle_timeout(b.t);
         if b.end {
-            part.core.finish(&mut events);
+            part.core.finish();
         }
+        events.extend(std::iter::from_fn(|| part.core.poll_event()));
         self.stats.batches += 1;
         // A partition's receiver records would speak for its share of the
         // traffic only: not published. The rest go to the publisher as

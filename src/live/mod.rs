@@ -3,9 +3,10 @@
 //!
 //! Shaped like mini-redis: a tokio runtime owns the sockets (one task per
 //! input, see [`inputs`]) and the signals; the core runs on two threads of
-//! its own, as `run --capture` does (its front stage fed through one bounded
-//! queue, its back stage owning the outputs), so the processing is exactly
-//! the offline pipeline with the system clock as its time. SIGTERM
+//! its own ([`stages`]), as `run --capture` does (its front stage fed
+//! through one bounded queue, its back stage owning the outputs), so the
+//! processing is exactly the offline pipeline with the system clock as its
+//! time. SIGTERM
 //! and SIGINT stop the inputs, let the core publish what it holds and end
 //! within two seconds; SIGHUP re-reads the configuration and replaces
 //! receivers (added, never renumbered), inputs and outputs while the core,
@@ -24,21 +25,19 @@ pub mod registry;
 pub mod replay;
 mod report;
 pub mod server;
+mod stages;
 pub mod stamp;
 pub mod stream_out;
 pub mod web;
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::Ordering;
-use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError};
+use std::sync::mpsc::sync_channel;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 
 use crate::config::Config;
 use crate::core::front::KnownReceiver;
-use crate::core::{Back, Cmd, Core, Event, Front};
 use crate::feed::capture::ReceiverDecl;
 use crate::feed::RawFrame;
 use config::InputConfig;
@@ -198,9 +197,18 @@ pub async fn serve(path: PathBuf, cfg: Config, sink: Option<Sink>) -> Result<()>
     let bound = inputs::bind_all(&cfg.input).await.map_err(anyhow::Error::msg)?;
     let reg = registry.clone();
     let core_thread = match sink {
-        None | Some(Sink::Core) => std::thread::Builder::new().name("core".into()).spawn(move || {
-            core_loop(core_cfg, decls, outputs, recorder, rx, reg, Extras { stats_every, state_file, web })
-        })?,
+        None | Some(Sink::Core) => {
+            let setup = stages::Setup {
+                receivers: decls,
+                outputs,
+                recorder,
+                registry: reg,
+                stats_every,
+                state_file,
+                web,
+            };
+            stages::start(&core_cfg, setup, rx)?
+        }
         Some(Sink::Cluster(nats, cluster)) => {
             let (out, publish) = tokio::sync::mpsc::channel(16);
             tokio::spawn(async move {
@@ -332,14 +340,6 @@ pub(crate) async fn start_http(
     Ok((tasks, Some(data)))
 }
 
-/// The core thread's settings beyond its configuration.
-struct Extras {
-    stats_every: f64,
-    state_file: Option<PathBuf>,
-    /// The HTTP server's documents, rendered by the tracker thread.
-    web: Option<Arc<web::WebData>>,
-}
-
 /// Applies a re-read configuration (SIGHUP): receivers added, updated and
 /// revoked; outputs replaced; inputs, if changed, closed and bound anew.
 /// Returns how many new inputs could not bind (said in the log; the
@@ -397,232 +397,6 @@ async fn reload(
     }
     *tasks = spawn_all(&ok, bound);
     new.input.len() - ok.len()
-}
-
-/// What the front thread tells the back thread: the commands of a batch
-/// and the time they were made, or new outputs (SIGHUP).
-enum ToBack {
-    Batch { cmds: Vec<Cmd>, now: f64, front: report::FrontSnapshot },
-    Outputs(Outputs),
-}
-
-/// Batches between the two stages: bounded, so a stalled tracker stops
-/// the front, whose input queue then drops (and counts) what it cannot take.
-const STAGE_QUEUE: usize = 64;
-
-/// The core's front thread: frames in, commands to the back thread, the
-/// recording, and the watchdog (a stalled back thread blocks it too).
-fn core_loop(
-    cfg: crate::core::CoreConfig,
-    decls: Vec<KnownReceiver>,
-    outputs: Outputs,
-    mut recorder: Option<Recorder>,
-    rx: Receiver<ToCore>,
-    registry: Arc<Registry>,
-    Extras { stats_every, state_file, web }: Extras,
-) {
-    let (mut front, back) = Core::stages(&cfg);
-    let mut cmds = Vec::new();
-    let mut forward = outputs.frame_forward();
-    front.know(decls.clone());
-    for KnownReceiver { decl: d, .. } in decls {
-        if let Some(r) = &mut recorder {
-            r.receiver(&d, unix_now());
-        }
-        front.add_receiver(d, &mut cmds);
-    }
-    if let Some(path) = &state_file {
-        match crate::mlat::state::LearntState::load(path) {
-            Ok(Some(state)) => {
-                let n = front.mlat_mut().restore(&state);
-                tracing::info!(path = %path.display(), receivers = n, "learnt state taken up");
-            }
-            Ok(None) => tracing::info!(path = %path.display(), "no learnt state yet"),
-            Err(e) => tracing::warn!("learnt state not taken up: {e}"),
-        }
-    }
-    let (to_back, from_front) = sync_channel::<ToBack>(STAGE_QUEUE);
-    let back_registry = registry.clone();
-    let back_thread = match std::thread::Builder::new()
-        .name("tracker".into())
-        .spawn(move || back_loop(back, outputs, from_front, back_registry, (stats_every, web)))
-    {
-        Ok(h) => h,
-        Err(e) => {
-            // Dropping the queue's receiver tells the inputs the core is gone.
-            tracing::error!("cannot start the tracker thread: {e}");
-            return;
-        }
-    };
-    let watchdog = sd_notify::watchdog_enabled();
-    let mut last_ping = Instant::now();
-    let mut dispatched = 0u64;
-    let (mut next_delay_metrics, mut announced) = (0.0, std::collections::HashSet::new());
-    // The receivers' MLAT line, with the back thread's stats line.
-    let mut next_receivers_line = unix_now() + stats_every;
-    let snapshot = |front: &Front, dispatched| report::FrontSnapshot {
-        stats: *front.stats(),
-        aircraft: front.decoder().stats().aircraft_created,
-        mlat_fixes: front.mlat().stats.fixes,
-        self_synced_fixes: front.mlat().stats.self_synced_fixes,
-        dispatched,
-    };
-    // What did not fit the last batch: a TCP read can bring thousands of
-    // frames at once, and they must not hold the tracker's batch back.
-    let mut carry: Option<ToCore> = None;
-    'run: loop {
-        let mut msg = match carry.take() {
-            Some(m) => Some(m),
-            None => match rx.recv_timeout(Duration::from_millis(10)) {
-                Ok(m) => Some(m),
-                Err(RecvTimeoutError::Timeout) => None,
-                Err(RecvTimeoutError::Disconnected) => break,
-            },
-        };
-        // A batch: whatever is queued, up to a bound, then one advance.
-        let mut n = 0;
-        while let Some(m) = msg.take() {
-            match m {
-                ToCore::Frames { rx: r, arrival, mut frames, from } => {
-                    let room = BATCH.saturating_sub(n).max(1);
-                    if frames.len() > room {
-                        let rest = frames.split_off(room);
-                        carry = Some(ToCore::Frames { rx: r, arrival, frames: rest, from: from.clone() });
-                    }
-                    from.admission.queued.fetch_sub(frames.len(), Ordering::Relaxed);
-                    for frame in &frames {
-                        if let Some(w) = &mut recorder {
-                            w.frame(arrival, r, frame);
-                        }
-                        forward.push(frame);
-                        front.on_frame(r, arrival, frame, &mut cmds);
-                    }
-                    dispatched += frames.len() as u64;
-                    n += frames.len();
-                    registry.queued.fetch_sub(frames.len(), Ordering::Relaxed);
-                }
-                ToCore::AddReceiver(d) => {
-                    n += 1;
-                    if let Some(w) = &mut recorder {
-                        w.receiver(&d, unix_now());
-                    }
-                    front.add_receiver(d, &mut cmds);
-                }
-                ToCore::Outputs(o) => {
-                    forward = o.frame_forward();
-                    if to_back.send(ToBack::Outputs(o)).is_err() {
-                        break 'run;
-                    }
-                }
-                ToCore::Shutdown => break 'run,
-            }
-            // Bounded batches: what a frame produced goes out within a
-            // fraction of a millisecond, not after tens of thousands of others.
-            if n < BATCH && carry.is_none() {
-                msg = rx.try_recv().ok();
-            }
-        }
-        forward.flush();
-        let now = unix_now();
-        front.advance(now, &mut cmds);
-        if now >= next_delay_metrics {
-            next_delay_metrics = now + 1.0;
-            report::front_metrics(&front, recorder.as_ref().map(|r| &r.stats), &mut announced);
-        }
-        if now >= next_receivers_line {
-            next_receivers_line = now + stats_every;
-            tracing::info!("{}", front.mlat().receivers_line(now, &|k| front.receiver_id(k).to_string()));
-        }
-        // The next batch's buffer at this one's size: grown from empty, every
-        // batch reallocated it several times (malloc and free were 6% of this
-        // thread at 1 M frames/s), as `run --capture` found before.
-        let cap = cmds.len();
-        let done = std::mem::replace(&mut cmds, Vec::with_capacity(cap));
-        let batch = ToBack::Batch { cmds: done, now, front: snapshot(&front, dispatched) };
-        if to_back.send(batch).is_err() {
-            break;
-        }
-        if watchdog.is_some_and(|w| last_ping.elapsed() * 2 >= w) {
-            let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
-            last_ping = Instant::now();
-        }
-    }
-    front.finish(&mut cmds);
-    if let Some(path) = &state_file {
-        match front.mlat().learnt(unix_now()).save(path) {
-            Ok(()) => tracing::info!(path = %path.display(), "learnt state saved"),
-            Err(e) => tracing::error!(path = %path.display(), "learnt state not saved: {e}"),
-        }
-    }
-    let _ = to_back.send(ToBack::Batch { cmds, now: unix_now(), front: snapshot(&front, dispatched) });
-    drop(to_back);
-    if back_thread.join().is_err() {
-        tracing::error!("the tracker thread panicked");
-    }
-    if let Some(w) = recorder {
-        w.finish();
-    }
-}
-
-/// The core's back thread: commands in, tracks and alerts out to the
-/// outputs (with the front's events, in order), stats and metrics.
-fn back_loop(
-    mut back: Back,
-    mut outputs: Outputs,
-    rx: Receiver<ToBack>,
-    registry: Arc<Registry>,
-    (stats_every, web): (f64, Option<Arc<web::WebData>>),
-) {
-    let mut events: Vec<Event> = Vec::new();
-    let mut web = web.map(web::WebPublisher::new);
-    let mut front = report::FrontSnapshot::default();
-    let mut next_metrics = 0.0;
-    let mut next_stats = unix_now() + stats_every;
-    let mut last = unix_now();
-    // The fixes counted at the last stats line: its rate is of the interval.
-    let mut last_fixes = 0;
-    for msg in rx {
-        let (cmds, now) = match msg {
-            ToBack::Outputs(o) => {
-                outputs = o;
-                continue;
-            }
-            ToBack::Batch { cmds, now, front: f } => {
-                front = f;
-                (cmds, now)
-            }
-        };
-        back.apply(cmds, &mut events);
-        outputs.publish(&events, |i| back.receiver_id(i), now);
-        if let Some(w) = &mut web {
-            w.observe(&events, now);
-            w.maybe_render(now, front.stats.messages, &registry);
-        }
-        events.clear();
-        if now >= next_stats {
-            report::stats_line(
-                &front,
-                &back,
-                &registry,
-                &outputs,
-                (front.stats.fixes - last_fixes, now - last),
-            );
-            next_stats = now + stats_every;
-            (last, last_fixes) = (now, front.stats.fixes);
-        }
-        if now >= next_metrics {
-            report::metrics(&front, &back, &registry, &outputs);
-            next_metrics = now + 1.0;
-        }
-    }
-    report::stats_line(
-        &front,
-        &back,
-        &registry,
-        &outputs,
-        (front.stats.fixes - last_fixes, unix_now() - last),
-    );
-    outputs::flush_stdout(Duration::from_secs(1));
 }
 
 #[cfg(all(test, target_os = "linux"))]

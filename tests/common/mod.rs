@@ -133,9 +133,11 @@ pub fn run_core_knowing(
         if let CaptureRecord::Receiver(d) = &rec {
             rxs.push(d.clone());
         }
-        core.on_record(rec, &mut events);
+        core.handle_record(rec);
+        events.extend(std::iter::from_fn(|| core.poll_event()));
     }
-    core.finish(&mut events);
+    core.finish();
+    events.extend(std::iter::from_fn(|| core.poll_event()));
     (core, events, rxs)
 }
 

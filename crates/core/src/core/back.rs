@@ -83,13 +83,19 @@ impl Back {
         self.receiver_ids.get(rx).map_or("?", String::as_str)
     }
 
+    /// When the tracker next has work of its own (a held publication, the
+    /// conflict assessment, the sweep): an `Advance` to that time is due.
+    pub fn poll_timeout(&self) -> Option<f64> {
+        self.fuser.poll_timeout()
+    }
+
     /// Applies commands in order; the events they make go to `out`.
-    pub fn apply(&mut self, cmds: impl IntoIterator<Item = Cmd>, out: &mut Vec<Event>) {
+    pub fn apply(&mut self, cmds: impl IntoIterator<Item = Cmd>, out: &mut impl Extend<Event>) {
         for cmd in cmds {
             let o = &mut self.outputs;
             match cmd {
                 Cmd::Receiver(id) => self.receiver_ids.push(id),
-                Cmd::Event(e) => out.push(e),
+                Cmd::Event(e) => out.extend(Some(e)),
                 Cmd::Measure { addr, nac_p, m, now } => self.fuser.on_measurement(addr, nac_p, m, now, o),
                 Cmd::Tdoa { g, now } => self.fuser.on_tdoa(&g, now, o),
                 Cmd::AltBaro { addr, alt_ft } => self.fuser.set_alt_baro(addr, alt_ft),

@@ -94,6 +94,16 @@ pub struct Front {
     known: Vec<KnownReceiver>,
 }
 
+/// The least float above `x` (finite `x`; `f64::next_up` is newer than
+/// the crate's minimum Rust).
+fn next_up(x: f64) -> f64 {
+    match x {
+        0.0 => f64::from_bits(1),
+        x if x > 0.0 => f64::from_bits(x.to_bits() + 1),
+        x => f64::from_bits(x.to_bits() - 1),
+    }
+}
+
 /// A receiver as the configuration describes it.
 #[derive(Clone, Debug)]
 pub struct KnownReceiver {
@@ -231,6 +241,27 @@ impl Front {
             self.advanced_to = now;
             cmds.push(Cmd::Advance(now));
         }
+    }
+
+    /// When `advance` next has work of its own: the oldest pending group's
+    /// wait runs out, or the once-a-second sweep (aircraft forgotten, the
+    /// receivers' reports) falls due. `None` before it was given a time.
+    pub fn poll_timeout(&self) -> Option<f64> {
+        let sweep = self.next_sweep.is_finite().then_some(self.next_sweep);
+        [self.grouper.next_deadline(), sweep].into_iter().flatten().reduce(f64::min)
+    }
+
+    /// When `advance` will pass the time on to the tracker, whose own work
+    /// is due at `tracker`: it is told at most once per `ADVANCE_STEP_S`.
+    pub fn tracker_timeout(&self, tracker: Option<f64>) -> Option<f64> {
+        let mut at = tracker?.max(self.advanced_to + ADVANCE_STEP_S);
+        // The step is tested as a difference, which can round below it at
+        // the sum: the first time the test passes, or a caller woken at
+        // the sum would find nothing done and be woken again at once.
+        while at.is_finite() && at - self.advanced_to < ADVANCE_STEP_S {
+            at = next_up(at);
+        }
+        Some(at)
     }
 
     /// End of input: everything pending is processed.

@@ -22,6 +22,8 @@ pub mod delay;
 pub mod front;
 pub mod lateness;
 
+use std::collections::VecDeque;
+
 use serde::Deserialize;
 
 pub use back::{Back, Cmd};
@@ -167,17 +169,23 @@ pub struct CoreStats {
     pub commb_velocities: u64,
 }
 
-/// Both stages on one thread: the front's commands applied as they come.
+/// Both stages on one thread, driven as quinn-proto drives a connection:
+/// `handle_*` calls give it what happened and when, `poll_event` hands out
+/// what it made, in order, and `poll_timeout` says when it next has work of
+/// its own (a group's wait running out, a held publication, the sweep), for
+/// `handle_timeout` then. It never reads a clock; the caller's `now` is the
+/// arrival-time scale of its frames.
 pub struct Core {
     front: Front,
     back: Back,
     cmds: Vec<Cmd>,
+    events: VecDeque<Event>,
 }
 
 impl Core {
     pub fn new(cfg: &CoreConfig) -> Self {
         let (front, back) = Core::stages(cfg);
-        Core { front, back, cmds: Vec::new() }
+        Core { front, back, cmds: Vec::new(), events: VecDeque::new() }
     }
 
     /// The two stages, for a caller that runs them on two threads.
@@ -186,8 +194,8 @@ impl Core {
         (Front::new(cfg), Back::new(fuser))
     }
 
-    fn run(&mut self, out: &mut Vec<Event>) {
-        self.back.apply(self.cmds.drain(..), out);
+    fn run(&mut self) {
+        self.back.apply(self.cmds.drain(..), &mut self.events);
     }
 
     /// Receivers the configuration describes (see [`Front::know`]).
@@ -195,35 +203,48 @@ impl Core {
         self.front.know(known);
     }
 
-    pub fn add_receiver(&mut self, decl: ReceiverDecl) -> usize {
+    /// A receiver declared; its index names it in frames.
+    pub fn handle_receiver(&mut self, decl: ReceiverDecl) -> usize {
         let rx = self.front.add_receiver(decl, &mut self.cmds);
-        self.run(&mut Vec::new());
+        self.run();
         rx
     }
 
     /// One record of a capture: a receiver declared, or a frame.
-    pub fn on_record(&mut self, rec: CaptureRecord, out: &mut Vec<Event>) {
+    pub fn handle_record(&mut self, rec: CaptureRecord) {
         self.front.on_record(rec, &mut self.cmds);
-        self.run(out);
+        self.run();
     }
 
-    /// One frame from receiver `rx`, arrived at `arrival` (Unix s).
-    pub fn on_frame(&mut self, rx: usize, arrival: f64, frame: &RawFrame, out: &mut Vec<Event>) {
-        self.front.on_frame(rx, arrival, frame, &mut self.cmds);
-        self.run(out);
+    /// One frame from receiver `rx`, arrived at `now` (Unix s).
+    pub fn handle_frame(&mut self, now: f64, rx: usize, frame: &RawFrame) {
+        self.front.on_frame(rx, now, frame, &mut self.cmds);
+        self.run();
     }
 
-    /// Moves time forward to `now` (arrival-time scale): groups whose wait
-    /// ran out are processed, held track publications released.
-    pub fn advance(&mut self, now: f64, out: &mut Vec<Event>) {
+    /// Time moved on to `now` without a frame: groups whose wait ran out are
+    /// processed, held track publications released.
+    pub fn handle_timeout(&mut self, now: f64) {
         self.front.advance(now, &mut self.cmds);
-        self.run(out);
+        self.run();
     }
 
     /// End of input: everything pending is processed.
-    pub fn finish(&mut self, out: &mut Vec<Event>) {
+    pub fn finish(&mut self) {
         self.front.finish(&mut self.cmds);
-        self.run(out);
+        self.run();
+    }
+
+    /// The next event made, in the order a single thread makes them.
+    pub fn poll_event(&mut self) -> Option<Event> {
+        self.events.pop_front()
+    }
+
+    /// When `handle_timeout` next has work (`None`: not until something
+    /// happens).
+    pub fn poll_timeout(&self) -> Option<f64> {
+        let tracker = self.front.tracker_timeout(self.back.poll_timeout());
+        [self.front.poll_timeout(), tracker].into_iter().flatten().reduce(f64::min)
     }
 
     /// The id of receiver `rx` (as declared), for the records that name it.

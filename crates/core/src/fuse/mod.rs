@@ -650,6 +650,20 @@ impl Fuser {
         }
     }
 
+    /// When `advance` next has work: a held publication's release, the
+    /// conflict assessment, the once-a-second sweep of aircraft no longer
+    /// heard (`None` while there is no aircraft and nothing held).
+    pub fn poll_timeout(&self) -> Option<f64> {
+        let held = self.held.front().map(|&(release, _)| release);
+        if self.aircraft.is_empty() {
+            return held;
+        }
+        [held, self.monitor.next_due(&self.cfg.conflict), Some(self.next_sweep)]
+            .into_iter()
+            .flatten()
+            .reduce(f64::min)
+    }
+
     /// Everything waiting is applied and published (end of input).
     pub fn finish(&mut self, out: &mut Vec<Output>) {
         while let Some((_, addr)) = self.held.pop_front() {

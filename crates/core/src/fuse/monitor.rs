@@ -28,6 +28,11 @@ impl ConflictMonitor {
 
     /// Whether an assessment is due at `now` (every `interval_s`); if so,
     /// the next one is scheduled.
+    /// When the next assessment falls due (`None` when conflicts are off).
+    pub fn next_due(&self, cfg: &ConflictConfig) -> Option<f64> {
+        cfg.enabled.then_some(self.next)
+    }
+
     pub fn due(&mut self, cfg: &ConflictConfig, now: f64) -> bool {
         if !cfg.enabled || now < self.next {
             return false;

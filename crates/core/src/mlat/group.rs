@@ -240,6 +240,11 @@ impl Grouper {
         self.pending.insert(key, seq, q);
     }
 
+    /// When the oldest pending group's wait runs out (`None`: none pending).
+    pub fn next_deadline(&self) -> Option<f64> {
+        self.queue.groups.front().map(|g| g.first_arrival + self.wait_s)
+    }
+
     /// Hands out every group whose wait has run out by `now`.
     pub fn advance(&mut self, now: f64, done: &mut impl FnMut(&Group)) {
         while self.queue.groups.front().is_some_and(|g| g.first_arrival + self.wait_s <= now) {

@@ -73,18 +73,18 @@ struct Acc {
 pub fn run_in_memory(capture: &[u8], cfg: &CoreConfig) -> Result<Vec<u8>> {
     let mut reader = CaptureReader::new(capture, "capture");
     let mut core = Core::new(cfg);
-    let mut events = Vec::new();
     let mut out = Vec::new();
-    while let Some(rec) = reader.next_record()? {
-        core.on_record(rec, &mut events);
-        for ev in events.drain(..) {
+    let mut write = |core: &mut Core| {
+        while let Some(ev) = core.poll_event() {
             write_event(&mut out, &ev, |i| core.receiver_id(i));
         }
+    };
+    while let Some(rec) = reader.next_record()? {
+        core.handle_record(rec);
+        write(&mut core);
     }
-    core.finish(&mut events);
-    for ev in events.drain(..) {
-        write_event(&mut out, &ev, |i| core.receiver_id(i));
-    }
+    core.finish();
+    write(&mut core);
     Ok(out)
 }
 
