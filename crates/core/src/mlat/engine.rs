@@ -28,7 +28,9 @@ use crate::geo::{ecef_distance, geodetic_to_ecef, FT_TO_M};
 
 use super::baro::{BaroCorrection, GeometricBaros};
 
+mod altitude;
 mod config;
+mod copies;
 mod outcome;
 mod placement;
 mod receivers;
@@ -36,7 +38,10 @@ pub use receivers::{gps_mean_offset, timing_report};
 mod robust;
 mod shared_mode;
 mod stats;
+mod sync_source;
 
+pub use altitude::baro_height;
+use altitude::Baro;
 pub use config::MlatConfig;
 pub use outcome::{GroupOutcome, MlatFix, NoFix, TdoaGroup};
 use shared_mode::jitter_ns;
@@ -53,18 +58,6 @@ struct Measured {
     sync_var: f64,
     self_var: f64,
     all_var: f64,
-}
-
-/// Height above the ellipsoid (m) of a barometric altitude, and its 1-sigma
-/// (m): corrected by the aircraft's own GNSS-baro difference when it reports
-/// one, or the region's (`baro`), else taken as is with the configured
-/// `baro_sigma_m`. One rule for the MLAT solver's altitude constraint and
-/// the tracker's heights.
-pub fn baro_height(alt_ft: i32, correction: Option<BaroCorrection>, baro_sigma_m: f64) -> (f64, f64) {
-    match correction {
-        Some(c) => ((alt_ft as f64 + c.diff_ft) * FT_TO_M, c.sigma_m),
-        None => (alt_ft as f64 * FT_TO_M, baro_sigma_m),
-    }
 }
 
 /// The receivers of one measurement (more than one when they stand too close
@@ -99,16 +92,6 @@ impl Judged {
     fn p_late(&self, k: usize) -> f64 {
         self.verdicts[k].map_or(0.0, |v| v.p_late)
     }
-}
-
-/// A barometric altitude recent enough to constrain a fix: feet, its
-/// variance (m^2: the 25 ft steps and the climb since), and its correction
-/// to the ellipsoid as known when it was reported.
-#[derive(Clone, Copy)]
-struct Baro {
-    ft: i32,
-    var_m2: f64,
-    correction: Option<BaroCorrection>,
 }
 
 struct Rx {
@@ -325,125 +308,6 @@ impl Mlat {
     /// constraints, with the aircraft's GNSS-baro difference when known.
     pub fn note_altitude(&mut self, addr: u32, alt_ft: i32, correction: Option<BaroCorrection>, now: f64) {
         self.aircraft.entry(addr).or_default().alt_ft = Some((alt_ft, now, correction));
-    }
-
-    /// One line of MLAT state: valid pairs, sync residual per receiver (ns),
-    /// fixes, rejects by reason, excluded receivers.
-    pub fn report(&self, now: f64, names: &dyn Fn(usize) -> String) -> String {
-        let params = &self.sync.params;
-        let mut per_rx: Vec<(f64, usize)> = vec![(0.0, 0); self.rxs.len()];
-        let mut valid = 0;
-        let mut total = 0;
-        for (&(i, j), p) in self.sync.pairs() {
-            total += 1;
-            if p.valid(now, params) {
-                valid += 1;
-                for k in [i, j] {
-                    per_rx[k].0 += p.residual_rms();
-                    per_rx[k].1 += 1;
-                }
-            }
-        }
-        let residuals: Vec<String> = per_rx
-            .iter()
-            .enumerate()
-            .filter(|(_, (_, n))| *n > 0)
-            .map(|(k, (s, n))| format!("{}={:.0}", names(k), s / *n as f64 * 1e9))
-            .collect();
-        let excluded: Vec<String> =
-            self.sync.health.iter().enumerate().filter(|(_, h)| h.excluded).map(|(k, _)| names(k)).collect();
-        let mut rejects: Vec<String> = (self.stats.rejects.iter())
-            .filter(|&(_, n)| n > 0)
-            .map(|(why, n)| format!("{}={n}", why.name()))
-            .collect();
-        rejects.sort();
-        // Receivers whose declared position the traffic contradicts.
-        let misplaced: Vec<String> = (self.rxs.iter().enumerate())
-            .filter_map(|(k, r)| {
-                let o = r.survey.offset().filter(|o| o.misplaced())?;
-                Some(format!(
-                    "{} declared {:.0} m off: {:+.0} m east, {:+.0} m north, +-{:.0} m",
-                    names(k),
-                    o.horizontal_m(),
-                    o.enu_m[0],
-                    o.enu_m[1],
-                    o.sigma_m
-                ))
-            })
-            .collect();
-        format!(
-            "mlat: {} fixes from {} groups; pairs {valid}/{total} valid; sync residual ns [{}]; rejects [{}]; \
-             excluded [{}]; misplaced [{}]; sync messages {}, pair updates {}, outliers {}, restarts {}; \
-             GPS time jumps {}; self-synchronised fixes {}",
-            self.stats.fixes,
-            self.stats.groups,
-            residuals.join(" "),
-            rejects.join(" "),
-            excluded.join(" "),
-            misplaced.join("; "),
-            self.stats.sync_messages,
-            self.sync.stats.updates,
-            self.sync.stats.outliers,
-            self.sync.stats.restarts,
-            self.stats.time_jumps,
-            self.stats.self_synced_fixes
-        )
-    }
-
-    /// A receiver's timestamp in its local seconds (small numbers, full
-    /// precision), referred to the start of the frame's preamble.
-    fn local_time(&mut self, rx: usize, ts: u64, arrival: f64) -> f64 {
-        let refer = match self.rxs[rx].clock {
-            ClockKind::Beast12 => self.cfg.timestamp_offset_beast12_ns,
-            ClockKind::Gps => self.cfg.timestamp_offset_gps_ns,
-        } * 1e-9;
-        self.raw_local_time(rx, ts, arrival) - refer
-    }
-
-    fn raw_local_time(&mut self, rx: usize, ts: u64, arrival: f64) -> f64 {
-        match self.rxs[rx].clock {
-            ClockKind::Gps => {
-                let sod_ns = (ts >> 30) as i64 * 1_000_000_000 + (ts & 0x3FFF_FFFF) as i64;
-                let day = (arrival / 86_400.0).floor() as i64;
-                let mut ns = day * 86_400_000_000_000 + sod_ns;
-                let arr_ns = (arrival * 1e9) as i64;
-                if ns - arr_ns > 43_200_000_000_000 {
-                    ns -= 86_400_000_000_000;
-                } else if arr_ns - ns > 43_200_000_000_000 {
-                    ns += 86_400_000_000_000;
-                }
-                let epoch = *self.gps_epoch_ns.get_or_insert(day * 86_400_000_000_000);
-                (ns - epoch) as f64 * 1e-9
-            }
-            ClockKind::Beast12 => {
-                let shared = self.shared.is_some();
-                let epoch_of = |ts: u64| if shared { shared_epoch(ts) } else { ts };
-                let epoch = *self.rxs[rx].beast_epoch.get_or_insert_with(|| epoch_of(ts));
-                let local = (ts as i64 - epoch as i64) as f64 / 12e6;
-                // A counter that moved seconds more or less than the server's
-                // clock restarted (or jumped): new epoch, its pairs start again.
-                if let Some((l0, a0)) = self.rxs[rx].last_seen {
-                    if ((local - l0) - (arrival - a0)).abs() > CLOCK_JUMP_S {
-                        self.sync.reset_receiver(rx);
-                        self.note_sync(SyncNote::ResetReceiver { now: arrival, rx: rx as u32 });
-                        let epoch = epoch_of(ts);
-                        let local = (ts - epoch) as f64 / 12e6;
-                        self.rxs[rx].beast_epoch = Some(epoch);
-                        self.rxs[rx].last_seen = Some((local, arrival));
-                        // A receiver whose clock jumps all the time must not
-                        // flood the log: its first jumps, then each power of
-                        // two (all of them in the metric).
-                        let n = self.sync.health[rx].clock_resets;
-                        if n.is_power_of_two() {
-                            tracing::info!(receiver = %self.rxs[rx].id, jumps = n, "clock jump: receiver restarted");
-                        }
-                        return local;
-                    }
-                }
-                self.rxs[rx].last_seen = Some((local, arrival));
-                local
-            }
-        }
     }
 
     fn reject(&mut self, why: Reject) {
@@ -710,262 +574,6 @@ impl Mlat {
             self.stats.excluded_receiver_copies += (before - copies.len()) as u64;
         }
         Ok(all_copies)
-    }
-
-    /// The aircraft's barometric altitude when recent enough to constrain a
-    /// fix, and the constraint it makes: its height above the ellipsoid and
-    /// sigma.
-    fn altitude_constraint(&self, ac: &AcState, now: f64) -> (Option<Baro>, Option<AltitudeConstraint>) {
-        // The barometric altitude's own height and variance (25 ft steps,
-        // climb since), apart from its correction to the ellipsoid, when
-        // recent enough to constrain the fix.
-        let baro = ac.alt_ft.and_then(|(ft, t, diff)| {
-            let age = (now - t).abs();
-            let quant = 25.0 * FT_TO_M / 12f64.sqrt();
-            let var = quant.powi(2) + (age * self.cfg.alt_growth_mps).powi(2);
-            (age <= self.cfg.max_alt_age_s).then_some(Baro { ft, var_m2: var, correction: diff })
-        });
-        let alt = baro.map(|Baro { ft, var_m2: var, correction: diff }| {
-            // The correction is the aircraft's own when its ADS-B reports
-            // one (GNSS minus baro, in 25 ft steps), else the region's from
-            // the ADS-B traffic, else from the fixes' geometry: taken as zero
-            // instead, an error the same for every fix of the flight (45 m
-            // on tma-busy, 90 m on LocaRDS) moved its fixes off the same way
-            // for minutes, which a track fed by them could not average away.
-            let diff = diff.or_else(|| {
-                let (lat, lon, _) = crate::geo::ecef_to_geodetic(ac.last_fix?.0);
-                self.geometric_baro.correction(lat, lon, ft, self.cfg.baro_sigma_m)
-            });
-            let (h_m, correction) = baro_height(ft, diff, self.cfg.baro_sigma_m);
-            AltitudeConstraint { h_m, sigma_m: (var + correction.powi(2)).sqrt() }
-        });
-        (baro, alt)
-    }
-
-    /// A group's usable copies on their receivers' local time, with their
-    /// arrivals: known receiver, timing, no GPS time off by seconds.
-    // Inlined: its result, inline vectors, would otherwise be copied out.
-    #[inline(always)]
-    fn usable_copies(&mut self, g: &Group) -> (GroupVec<LocalCopy>, GroupVec<f64>) {
-        // Usable copies: known receiver, timing. An excluded receiver's are
-        // read (its clock jumps seen) and synchronise it, so that it comes
-        // back once its sync holds; they stay out of the fix.
-        let mut copies: GroupVec<LocalCopy> = GroupVec::new();
-        let mut arrivals: GroupVec<f64> = GroupVec::new();
-        for c in &g.copies {
-            if c.rx >= self.rxs.len() {
-                self.stats.unknown_receiver += 1;
-                continue;
-            }
-            if !crate::feed::has_timing(c.timestamp) {
-                self.stats.no_timing += 1;
-                continue;
-            }
-            let resets = self.sync.health[c.rx].clock_resets;
-            let t = self.local_time(c.rx, c.timestamp, c.arrival);
-            // A counter's jump is its restart; a GPS time's is judged
-            // against the others' (below).
-            if self.rxs[c.rx].clock == ClockKind::Beast12 {
-                let jumped = self.sync.health[c.rx].clock_resets != resets;
-                self.note_jump(c.rx, jumped);
-            }
-            copies.push(LocalCopy { rx: c.rx, t });
-            arrivals.push(c.arrival);
-        }
-        self.drop_gps_time_jumps(&mut copies, &mut arrivals);
-        (copies, arrivals)
-    }
-
-    /// The copies' synchronised times as the solver's measurements, one per
-    /// site, with the sync variances the fix's report and calibration need.
-    // Inlined: its result, inline vectors, would otherwise be copied out.
-    #[inline(always)]
-    fn measurements(&mut self, copies: &[LocalCopy], times: &[Option<(f64, f64)>], addr: u32) -> Measured {
-        // One measurement per site: receivers closer than the minimum
-        // separation add no geometry, so their times are averaged (inverse
-        // variance) into one measurement with a smaller sigma.
-        let mut ms: GroupVec<Measurement> = GroupVec::new();
-        let mut sites: GroupVec<Site> = GroupVec::new();
-        // Each measurement's clock synchronisation variance (s^2): not the receiver's own.
-        let mut sync_vars: GroupVec<f64> = GroupVec::new();
-        let (mut sync_var, mut self_var, mut all_var) = (0.0, 0.0, 0.0);
-        for (c, t) in copies.iter().zip(times) {
-            let Some((t, var)) = t else { continue };
-            sync_var += var;
-            self_var += var * self.sync.references[c.rx].share_of(addr);
-            all_var += var + self.rxs[c.rx].sigma().powi(2);
-            let rx = &self.rxs[c.rx];
-            // A GPS receiver's offset came off in the common time base.
-            let offset = if rx.clock == ClockKind::Gps { 0.0 } else { rx.bias() };
-            let own = rx.sigma().powi(2) + rx.surveyed_var_s2;
-            let m = Measurement { pos: rx.ecef, t: *t - offset, sigma_t: (own + var).sqrt() };
-            match ms.iter().position(|o| ecef_distance(o.pos, m.pos) < self.cfg.min_separation_m) {
-                Some(k) => {
-                    self.stats.close_receivers += 1;
-                    let (w1, w2) = (1.0 / ms[k].sigma_t.powi(2), 1.0 / m.sigma_t.powi(2));
-                    ms[k].t = (ms[k].t * w1 + m.t * w2) / (w1 + w2);
-                    ms[k].sigma_t = (1.0 / (w1 + w2)).sqrt();
-                    sync_vars[k] = sync_vars[k].min(*var);
-                    sites[k].push(c.rx);
-                }
-                None => {
-                    ms.push(m);
-                    sites.push(smallvec::smallvec![c.rx]);
-                    sync_vars.push(*var);
-                }
-            }
-        }
-        Measured {
-            g: robust::GroupCopies { ms, sites, sync_vars, dropped: Dropped::new() },
-            sync_var,
-            self_var,
-            all_var,
-        }
-    }
-
-    fn note_jump(&mut self, rx: usize, jumped: bool) {
-        let r = &mut self.rxs[rx];
-        r.jumps += JUMP_MEMORY * (jumped as u8 as f64 - r.jumps);
-    }
-
-    /// GPS-timed copies of one transmission agree to milliseconds (the
-    /// time light takes across any network): one off by more is a GPS time
-    /// that jumped (by whole seconds, typically), and would fail the fix,
-    /// the clock pairs and every GPS receiver's survey with it. Among three
-    /// or more the majority tells which; of two, the one that jumps more
-    /// often, or both when neither does.
-    fn drop_gps_time_jumps(&mut self, copies: &mut GroupVec<LocalCopy>, arrivals: &mut GroupVec<f64>) {
-        let gps: GroupVec<usize> =
-            (0..copies.len()).filter(|&k| self.rxs[copies[k].rx].clock == ClockKind::Gps).collect();
-        if gps.len() < 2 {
-            return;
-        }
-        // Nearly always they agree, and no median is needed to say so.
-        let (lo, hi) = (gps.iter()).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &k| {
-            (lo.min(copies[k].t), hi.max(copies[k].t))
-        });
-        if hi - lo <= GPS_AGREE_S {
-            for &k in &gps {
-                self.note_jump(copies[k].rx, false);
-            }
-            return;
-        }
-        let mut times: GroupVec<f64> = gps.iter().map(|&k| copies[k].t).collect();
-        times.sort_by(f64::total_cmp);
-        let median = times[times.len() / 2];
-        let mut off: GroupVec<usize> =
-            gps.iter().copied().filter(|&k| (copies[k].t - median).abs() > GPS_AGREE_S).collect();
-        if gps.len() == 2 && !off.is_empty() {
-            let (a, b) = (gps[0], gps[1]);
-            let (ja, jb) = (self.rxs[copies[a].rx].jumps, self.rxs[copies[b].rx].jumps);
-            off = if ja > jb {
-                smallvec::smallvec![a]
-            } else if jb > ja {
-                smallvec::smallvec![b]
-            } else {
-                smallvec::smallvec![a, b]
-            };
-        }
-        for &k in &gps {
-            self.note_jump(copies[k].rx, off.contains(&k));
-        }
-        self.stats.time_jumps += off.len() as u64;
-        for &k in off.iter().rev() {
-            copies.remove(k);
-            arrivals.remove(k);
-        }
-    }
-
-    /// A receiver whose copies stay out of fixes: excluded by its sync's
-    /// health, found misplaced, or its time jumping.
-    fn out_of_fixes(&self, rx: usize) -> bool {
-        self.sync.health[rx].excluded || self.rxs[rx].misplaced || self.rxs[rx].jumps > JUMPS_EXCLUDE
-    }
-
-    /// Aircraft health: the mean normalised innovation of a source's sync
-    /// measurements against converged pairs is about 1 for an honest
-    /// aircraft (less, as the noise model is a little generous); a position
-    /// offset shows as a consistent bias and drives it far up. Past the
-    /// threshold the aircraft is no longer a sync source (for good: a
-    /// spoofer does not become honest).
-    fn judge_sync_source(&mut self, addr: u32, nis_sum: f64, judged: u32) {
-        if judged == 0 {
-            return;
-        }
-        let a = self.aircraft.entry(addr).or_default();
-        let mean = nis_sum / judged as f64;
-        a.sync_uses += 1;
-        a.sync_nis += (mean - a.sync_nis) / (a.sync_uses.min(20) as f64);
-        if !a.sync_banned && a.sync_uses >= 10 && a.sync_nis > SYNC_SOURCE_MAX_NIS {
-            a.sync_banned = true;
-            self.stats.sync_banned_aircraft += 1;
-            tracing::warn!(
-                aircraft = format!("{addr:06X}"),
-                "ADS-B positions disagree with the timing: not used for sync"
-            );
-        }
-    }
-
-    /// Recent mean normalised innovation of an aircraft's sync measurements.
-    pub fn sync_nis(&self, addr: u32) -> Option<f64> {
-        self.aircraft.get(&addr).filter(|a| a.sync_uses > 0).map(|a| a.sync_nis)
-    }
-
-    /// Whether an aircraft's ADS-B positions are refused as sync sources.
-    pub fn sync_banned(&self, addr: u32) -> bool {
-        self.aircraft.get(&addr).is_some_and(|a| a.sync_banned)
-    }
-
-    fn sync_from(
-        &mut self,
-        copies: &[LocalCopy],
-        p: [f64; 3],
-        addr: u32,
-        sigma_pos: f64,
-        now: f64,
-    ) -> (f64, u32) {
-        self.stats.sync_messages += 1;
-        let n = copies.len();
-        // On the stack: a sync message's dozen heap lists cost as much as
-        // its clock filters' updates.
-        let ranges: GroupVec<f64> = copies.iter().map(|c| ecef_distance(self.rxs[c.rx].ecef, p)).collect();
-        let var: GroupVec<f64> = copies.iter().map(|c| self.rxs[c.rx].sigma().powi(2)).collect();
-        // The emitter's position error moves the two ranges differently: by
-        // the difference of the unit vectors towards the receivers.
-        let units: GroupVec<[f64; 3]> = copies
-            .iter()
-            .zip(&ranges)
-            .map(|(c, r)| {
-                let e = self.rxs[c.rx].ecef;
-                [(e[0] - p[0]) / r, (e[1] - p[1]) / r, (e[2] - p[2]) / r]
-            })
-            .collect();
-        // Only the pairs `observe` reads (a before b).
-        let mut geom: smallvec::SmallVec<[f64; 64]> = smallvec::smallvec![0.0; n * n];
-        for a in 0..n {
-            for b in a + 1..n {
-                let d2: f64 = (0..3).map(|k| (units[a][k] - units[b][k]).powi(2)).sum();
-                geom[a * n + b] = sigma_pos * sigma_pos * d2 / (C_AIR * C_AIR);
-            }
-        }
-        match &mut self.shared {
-            None => {
-                let judged = self.sync.observe(copies, &ranges, &var, &geom, now);
-                self.sync.note_reference(copies, addr);
-                judged
-            }
-            Some(notes) => {
-                notes.push(SyncNote::Observed {
-                    now,
-                    addr,
-                    copies: copies.iter().map(|c| (c.rx as u32, c.t)).collect(),
-                    ranges: ranges.to_vec(),
-                    var: var.to_vec(),
-                    geom: geom.to_vec(),
-                });
-                self.sync.judge(copies, &ranges, &var, &geom)
-            }
-        }
     }
 }
 

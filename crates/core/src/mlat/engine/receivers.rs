@@ -146,3 +146,68 @@ pub fn timing_report(
         position_offset_sigma_m: None,
     }
 }
+
+impl Mlat {
+    /// One line of MLAT state: valid pairs, sync residual per receiver (ns),
+    /// fixes, rejects by reason, excluded receivers.
+    pub fn report(&self, now: f64, names: &dyn Fn(usize) -> String) -> String {
+        let params = &self.sync.params;
+        let mut per_rx: Vec<(f64, usize)> = vec![(0.0, 0); self.rxs.len()];
+        let mut valid = 0;
+        let mut total = 0;
+        for (&(i, j), p) in self.sync.pairs() {
+            total += 1;
+            if p.valid(now, params) {
+                valid += 1;
+                for k in [i, j] {
+                    per_rx[k].0 += p.residual_rms();
+                    per_rx[k].1 += 1;
+                }
+            }
+        }
+        let residuals: Vec<String> = per_rx
+            .iter()
+            .enumerate()
+            .filter(|(_, (_, n))| *n > 0)
+            .map(|(k, (s, n))| format!("{}={:.0}", names(k), s / *n as f64 * 1e9))
+            .collect();
+        let excluded: Vec<String> =
+            self.sync.health.iter().enumerate().filter(|(_, h)| h.excluded).map(|(k, _)| names(k)).collect();
+        let mut rejects: Vec<String> = (self.stats.rejects.iter())
+            .filter(|&(_, n)| n > 0)
+            .map(|(why, n)| format!("{}={n}", why.name()))
+            .collect();
+        rejects.sort();
+        // Receivers whose declared position the traffic contradicts.
+        let misplaced: Vec<String> = (self.rxs.iter().enumerate())
+            .filter_map(|(k, r)| {
+                let o = r.survey.offset().filter(|o| o.misplaced())?;
+                Some(format!(
+                    "{} declared {:.0} m off: {:+.0} m east, {:+.0} m north, +-{:.0} m",
+                    names(k),
+                    o.horizontal_m(),
+                    o.enu_m[0],
+                    o.enu_m[1],
+                    o.sigma_m
+                ))
+            })
+            .collect();
+        format!(
+            "mlat: {} fixes from {} groups; pairs {valid}/{total} valid; sync residual ns [{}]; rejects [{}]; \
+             excluded [{}]; misplaced [{}]; sync messages {}, pair updates {}, outliers {}, restarts {}; \
+             GPS time jumps {}; self-synchronised fixes {}",
+            self.stats.fixes,
+            self.stats.groups,
+            residuals.join(" "),
+            rejects.join(" "),
+            excluded.join(" "),
+            misplaced.join("; "),
+            self.stats.sync_messages,
+            self.sync.stats.updates,
+            self.sync.stats.outliers,
+            self.sync.stats.restarts,
+            self.stats.time_jumps,
+            self.stats.self_synced_fixes
+        )
+    }
+}
