@@ -26,7 +26,9 @@
 //! back over minutes (tma-busy's MLAT tracks: 570 m RMS, 74 m now).
 //!
 //! Beside it: what a track is given (`measurement.rs`) and what it gives
-//! (`estimate.rs`); its tests are in `track_tests.rs`.
+//! (`estimate.rs`); its tests are in `track_tests.rs`. Within it: the
+//! horizontal position's measurement model, gate and restarts
+//! (`track/position.rs`) and the vertical channel (`track/vertical.rs`).
 
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -43,6 +45,10 @@ use super::kf::{self, Gaussian, Linear};
 pub use super::measurement::{Measurement, Observation, Outcome, Source};
 use super::plane::Plane;
 
+mod position;
+mod vertical;
+pub use vertical::Vertical;
+
 /// Inverse-gamma scale of a source's nominal measurement covariance.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Vb {
@@ -57,57 +63,6 @@ impl Vb {
 
     pub fn scale(&self) -> f64 {
         self.beta / self.alpha
-    }
-}
-
-/// Vertical channel: WGS-84 height and climb rate.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Vertical {
-    pub x: Vector2<f64>,
-    pub p: Matrix2<f64>,
-    /// Heights left out by the gate since the last one taken.
-    gated_heights: u8,
-}
-
-impl Vertical {
-    fn predict(&mut self, dt: f64, q: f64) {
-        let f = Matrix2::new(1.0, dt, 0.0, 1.0);
-        let qm = Matrix2::new(dt.powi(3) / 3.0, dt * dt / 2.0, dt * dt / 2.0, dt) * q;
-        self.x = f * self.x;
-        self.p = f * self.p * f.transpose() + qm;
-    }
-
-    fn new(h: f64, var: f64) -> Vertical {
-        Vertical { x: Vector2::new(h, 0.0), p: Matrix2::new(var, 0.0, 0.0, 25.0), gated_heights: 0 }
-    }
-
-    /// Applies a height (row 0) or climb rate (row 1); an outlier beyond the
-    /// 4.5-sigma gate is left out. Heights gated `VERTICAL_RESTART` times in
-    /// a row start the channel again on the newest: an aircraft levelling
-    /// off or starting a climb without climb rates to say so (Mode S only)
-    /// leaves a channel that believed its precise heights behind, and
-    /// without a restart it never came back (tma-busy with the region's
-    /// GNSS-baro difference, 8 m heights: a kilometre off for minutes).
-    fn update(&mut self, row: usize, z: f64, var: f64) {
-        let s = self.p[(row, row)] + var;
-        let nu = z - self.x[row];
-        if !(s > 0.0 && s.is_finite()) || nu * nu / s > 4.5 * 4.5 {
-            if row == 0 {
-                self.gated_heights += 1;
-                if self.gated_heights >= VERTICAL_RESTART {
-                    *self = Vertical::new(z, var);
-                }
-            }
-            return;
-        }
-        if row == 0 {
-            self.gated_heights = 0;
-        }
-        let k = self.p.column(row) / s;
-        self.x += k * nu;
-        let ikh = Matrix2::identity()
-            - k * Vector2::new((row == 0) as u8 as f64, (row == 1) as u8 as f64).transpose();
-        self.p = ikh * self.p * ikh.transpose() + k * var * k.transpose();
     }
 }
 
@@ -552,216 +507,6 @@ impl Track {
             return None;
         }
         imm.update(prep, m).map(|s| s.nis)
-    }
-
-    /// A vertical measurement: height (row 0) or climb rate (row 1).
-    ///
-    /// Heights as uncertain as a barometric altitude without the GNSS
-    /// difference carry an offset that persists (pressure, temperature):
-    /// averaging many of them would not remove it, so they only keep the
-    /// channel within their own uncertainty, never below it.
-    fn vertical(&mut self, t: f64, row: usize, z: f64, var: f64) {
-        match &mut self.state.vertical {
-            Some(v) => {
-                v.predict(t - self.state.t_v, self.cfg.vertical_q);
-                if !(row == 0 && var >= BIASED_HEIGHT_VAR && v.p[(0, 0)] < var) {
-                    v.update(row, z, var);
-                }
-            }
-            None if row == 0 => self.state.vertical = Some(Vertical::new(z, var)),
-            None => return,
-        }
-        self.state.t_v = t;
-    }
-
-    #[allow(clippy::too_many_arguments)]
-    fn position(
-        &mut self,
-        t: f64,
-        dt: f64,
-        lat: f64,
-        lon: f64,
-        cov_en: Matrix2<f64>,
-        time_sigma_s: f64,
-        source: Source,
-    ) -> Outcome {
-        let (Some(plane), Some(imm)) = (self.state.plane, self.state.imm.as_mut()) else {
-            self.start(lat, lon, cov_en);
-            return Outcome::Applied { nis: 0.0 };
-        };
-        let z = Vector2::from(plane.to_en(lat, lon));
-        // The covariance is given in the reporting point's east/north.
-        let turn = plane.from_local(lat, lon);
-        let cov_en = turn * cov_en * turn.transpose();
-        let prep = imm.prepare(dt);
-        let pred = prep.combined();
-        // The report's time error moves it along the velocity.
-        let v = pred.x.fixed_rows::<2>(2).into_owned();
-        let nominal = cov_en + v * v.transpose() * (time_sigma_s * time_sigma_s);
-        let vb = &mut self.state.vb[source as usize];
-        if self.cfg.vb {
-            let (rho, prior) = match source {
-                Source::Adsb => (self.cfg.vb_forgetting_adsb, self.cfg.vb_prior_adsb),
-                Source::Mlat => (self.cfg.vb_forgetting, self.cfg.vb_prior),
-            };
-            vb.alpha = rho * vb.alpha + (1.0 - rho) * prior;
-            vb.beta = rho * vb.beta + (1.0 - rho) * prior;
-        }
-        let Some(nom_inv) = nominal.try_inverse() else {
-            return Outcome::Gated;
-        };
-        let h = kf::h();
-        let base = Linear::new(h, z, nominal);
-        let linear = |scale: f64| base.with_r(nominal * scale);
-        let nis = {
-            let (nu, s) = pred.innovation(&linear(vb.scale()));
-            s.try_inverse().map_or(f64::INFINITY, |si| (nu.transpose() * si * nu)[0])
-        };
-        // NaN (a degenerate innovation) is gated too.
-        if nis.is_nan() || nis > self.gate {
-            // What the innovation would teach the scale, no more than one on
-            // the gate would: one wild position must not carry the scale past
-            // the gate alone.
-            let excess = self.cfg.vb.then(|| {
-                let (nu, _) = pred.innovation(&linear(1.0));
-                let nu = nu * (self.gate / nis).sqrt().min(1.0);
-                let hph = h * pred.p * h.transpose();
-                (nom_inv * (nu * nu.transpose() - hph)).trace().max(0.0)
-            });
-            return self.gated(source, excess, (lat, lon, cov_en));
-        }
-        self.state.gated_in_a_row = 0;
-        self.state.accepted_since_start += 1;
-        let pending = &mut self.state.pending[source as usize];
-        if !pending.before_restart {
-            // Outliers the track outlived: they were the noise's.
-            pending.commit(vb);
-        } else if self.state.accepted_since_start >= self.cfg.max_gated_in_a_row {
-            // The restart cured it: the track was wrong, not the noise.
-            *pending = Pending::default();
-        }
-        // One variational step per measurement: update with the current noise
-        // scale, then the scale's posterior from that update's residual.
-        // Iterating the two to a fixed point (up to three updates) changed
-        // no figure of the fusion or VB scenarios and cost 10% of the pipeline.
-        //
-        // Not over a track's first positions after a (re)start, while its
-        // velocity is still unknown: their residuals are the velocity's, the
-        // scale they taught made the next updates trust the positions less,
-        // so the velocity came later and the residuals grew again (a source
-        // claiming 25 m with 100 m errors, 16 in scale, taught 320 within
-        // 17 s; with ADS-B's long memory it took a minute to come down).
-        let done = imm.update(&prep, &linear(vb.scale()));
-        let settled = self.state.accepted_since_start > self.cfg.max_gated_in_a_row;
-        if let (Some(step), true, true) = (done, self.cfg.vb, settled) {
-            let post = step.estimate;
-            let res = z - h * post.x;
-            let e = nom_inv * (res * res.transpose() + h * post.p * h.transpose());
-            vb.alpha += 1.0;
-            vb.beta += 0.5 * e.trace();
-        }
-        if self.cfg.vb {
-            widen_for_scale(imm, vb.scale(), &mut self.state.covered_scale[source as usize]);
-        }
-        match done {
-            Some(step) => {
-                if self.keep_gain {
-                    self.gain = gain(&pred, &step.estimate).map(|a| (t, a));
-                }
-                self.maybe_recentre(&step.estimate.x);
-                Outcome::Applied { nis: step.nis }
-            }
-            None => {
-                tracing::warn!("track filter went numerically bad; restarted");
-                self.restarts += 1;
-                self.start(lat, lon, cov_en);
-                Outcome::Restarted
-            }
-        }
-    }
-
-    /// A position the gate left out: what its innovation would teach the
-    /// scale (`excess`, with VB) is held back until it is clear the noise and
-    /// not the track is wrong (`Pending`), and too many in a row restart the
-    /// track on it (`at`: its position and covariance in the plane).
-    fn gated(&mut self, source: Source, excess: Option<f64>, at: (f64, f64, Matrix2<f64>)) -> Outcome {
-        self.state.gated_in_a_row += 1;
-        if let Some(excess) = excess {
-            let (pending, vb) =
-                (&mut self.state.pending[source as usize], &mut self.state.vb[source as usize]);
-            if pending.before_restart && self.state.accepted_since_start < self.cfg.max_gated_in_a_row {
-                // The restart did not cure it: the measurements are noisy.
-                pending.commit(vb);
-            }
-            pending.alpha += 1.0;
-            pending.beta += 0.5 * excess;
-        }
-        if self.state.gated_in_a_row > self.cfg.max_gated_in_a_row {
-            self.restarts += 1;
-            for (p, vb) in self.state.pending.iter_mut().zip(&mut self.state.vb) {
-                // Failed twice in a row: not the track's fault.
-                if p.before_restart {
-                    p.commit(vb);
-                }
-                p.before_restart = true;
-            }
-            let (lat, lon, cov_en) = at;
-            self.start(lat, lon, cov_en);
-            return Outcome::Restarted;
-        }
-        Outcome::Gated
-    }
-
-    /// A source's nominal noise changes from a stand-in to its own claim
-    /// (the NACp arrives): what the scale learned under the stand-in is the
-    /// real noise, so it is kept in metres, not as a ratio to a nominal that
-    /// no longer applies. (vb-noise sends NACp every 10 s: a transponder
-    /// honestly claiming NACp 6 was first judged against the 38 m stand-in,
-    /// and the ratio learned then, carried into its real claim, made its
-    /// ADS-B track 486 m RMS against 189 m without VB.)
-    fn rebase_vb(&mut self, source: Source, trace: f64, claimed: bool) {
-        let i = source as usize;
-        if let Some((old, false)) = self.state.nominal[i] {
-            if self.cfg.vb && claimed && old > 0.0 && trace > 0.0 {
-                let k = old / trace;
-                self.state.vb[i].beta *= k;
-                self.state.pending[i].beta *= k;
-                self.state.covered_scale[i] *= k;
-            }
-        }
-        self.state.nominal[i] = Some((trace, claimed));
-    }
-
-    /// (Re)starts the horizontal filter on a position: velocity unknown.
-    fn start(&mut self, lat: f64, lon: f64, cov_en: Matrix2<f64>) {
-        let plane = Plane::new(lat, lon, self.state.vertical.map_or(0.0, |v| v.x[0]));
-        let vs = INIT_SPEED_SIGMA * INIT_SPEED_SIGMA;
-        let va = INIT_ACCEL_SIGMA * INIT_ACCEL_SIGMA;
-        let mut p = Matrix6::from_diagonal(&Vector6::new(0.0, 0.0, vs, vs, va, va));
-        p.fixed_view_mut::<2, 2>(0, 0).copy_from(&cov_en);
-        self.state.plane = Some(plane);
-        let spec = Self::spec_at(&self.specs, self.state.t).clone();
-        self.state.imm = Some(Imm::with_spec(spec, Gaussian { x: Vector6::zeros(), p }));
-        self.state.gated_in_a_row = 0;
-        self.state.accepted_since_start = 0;
-        self.state.covered_scale = self.state.vb.map(|vb| vb.scale());
-    }
-
-    /// `x`: the filter's newest combined estimate.
-    fn maybe_recentre(&mut self, x: &Vector6<f64>) {
-        let (Some(plane), Some(imm)) = (self.state.plane, self.state.imm.as_mut()) else {
-            return;
-        };
-        let h = self.state.vertical.map_or(plane.h, |v| v.x[0]);
-        if x[0].hypot(x[1]) < RECENTRE_M && (h - plane.h).abs() < REHEIGHT_M {
-            return;
-        }
-        let (lat, lon) = plane.to_geodetic(x[0], x[1]);
-        let new = Plane::new(lat, lon, h);
-        for f in &mut imm.filters {
-            *f = transfer(f, &plane, &new);
-        }
-        self.state.plane = Some(new);
     }
 
     /// Where the track was at its newest horizontal update, without the
