@@ -19,8 +19,10 @@
 //! speeds beyond 1,200 m/s, times far from now): rejected and counted.
 //!
 //! Here: the aircraft table and the [`Fuser`] that feeds, fuses and
-//! publishes; beside it the configuration (`config.rs`), what is published
-//! (`records.rs`), the MLAT hold's queue (`hold.rs`), the fusion methods
+//! publishes; beside it one measurement into an aircraft's tracks
+//! (`tracks.rs`), a publication made (`publication.rs`), the configuration
+//! (`config.rs`), what is published (`records.rs`), the MLAT hold's queue
+//! (`hold.rs`), the particle filter's aircraft (`sparse.rs`), the fusion methods
 //! ([`methods`]), conflict prediction ([`conflict`]) and the ADS-B
 //! conformance monitor ([`conformance`]).
 
@@ -30,10 +32,12 @@ pub mod conformance;
 mod hold;
 pub mod methods;
 pub mod monitor;
+mod publication;
 mod records;
 mod sparse;
 #[cfg(test)]
 mod tests;
+mod tracks;
 
 use crate::FastMap;
 use std::collections::VecDeque;
@@ -401,112 +405,6 @@ impl Fuser {
         }
     }
 
-    fn apply_to_tracks(&mut self, addr: u32, m: Measurement) {
-        let Some(a) = self.aircraft.get_mut(&addr) else {
-            return;
-        };
-        if m.source == Source::Adsb && !a.adsb_heard {
-            // From its first ADS-B on, in time order: a late measurement
-            // re-run from the history switches as it did the first time. A
-            // fused track whose ADS-B was flagged before any was applied (it
-            // waited for the MLAT hold) stays fed by MLAT alone.
-            a.adsb_heard = true;
-            let fused = (!a.adsb_suspect).then_some(&mut a.fused);
-            for track in fused.into_iter().chain(&mut a.single) {
-                track.set_spec(m.t, self.spec.clone());
-            }
-        }
-        // A flagged aircraft's ADS-B stays out of the fused track.
-        let into_fused = !(a.adsb_suspect && m.source == Source::Adsb);
-        let outcome = if into_fused {
-            self.stats.reruns += (m.t < a.fused.t()) as u64;
-            a.fused.apply(m)
-        } else {
-            self.stats.suspect_excluded += 1;
-            Outcome::Early
-        };
-        // Single-source tracks cost as much as the fused one: run only when
-        // a track-to-track method or their publication needs them.
-        let single = if self.singles {
-            a.single[m.source as usize].apply(m)
-        } else if into_fused {
-            outcome
-        } else {
-            Outcome::Applied { nis: 0.0 }
-        };
-        if self.singles && a.single[0].keep_gain {
-            let model = self.spec.models[0];
-            let f_q = |dt: f64| model.transition(dt);
-            match (single, a.single[m.source as usize].gain) {
-                (Outcome::Restarted, _) => a.cross = Cross::new(),
-                (Outcome::Applied { .. }, Some((t, g))) if t == m.t => {
-                    a.cross.update(t, m.source == Source::Adsb, &g, f_q)
-                }
-                _ => {}
-            }
-        }
-        match outcome {
-            Outcome::TooLate => self.stats.too_late += 1,
-            Outcome::Gated => self.stats.gated += 1,
-            Outcome::Restarted => self.stats.restarts += 1,
-            _ => {}
-        }
-        if !matches!(m.obs, Observation::Position { .. } | Observation::Tdoa { .. }) {
-            return;
-        }
-        if matches!(single, Outcome::Applied { .. } | Outcome::Restarted) {
-            a.last_source_t[m.source as usize] = a.last_source_t[m.source as usize].max(m.t);
-        }
-        if let Observation::Position { lat, lon, cov_en, surface, .. } = m.obs {
-            a.surface = surface;
-            if m.t - a.motion_t >= self.tcfg.motion_interval_s {
-                a.motion_t = m.t;
-                Self::motion(a, lat, lon, cov_en);
-            }
-        }
-        if !matches!(outcome, Outcome::Applied { .. }) || a.fused.stage != Stage::Confirmed {
-            return;
-        }
-        // Due already in this batch: it goes out at its newest measurement
-        // (the ADS-B a moment after its own transmission's fix, say).
-        if let Some(p) = a.pending {
-            a.pending = Some(p.max(m.t));
-            return;
-        }
-        if m.t < a.next_due {
-            return;
-        }
-        let period = a.period_s(&self.tcfg);
-        if !a.next_due.is_finite() {
-            a.next_due = m.t;
-        }
-        while a.next_due <= m.t {
-            a.next_due += period;
-        }
-        a.pending = Some(m.t);
-    }
-
-    /// The static/moving test over the aircraft's recent position
-    /// measurements; an airborne aircraft faster than a taxiing one moves
-    /// without the test (which costs a small matrix factorisation).
-    fn motion(a: &mut Aircraft, lat: f64, lon: f64, cov: Matrix2<f64>) {
-        if !a.surface && a.fused.speed().is_some_and(|v| v > 30.0) {
-            a.motion_state = Motion::Moving;
-            return;
-        }
-        let plane = match a.motion_plane {
-            Some(p) if crate::geo::distance_m(p.lat, p.lon, lat, lon) < 5_000.0 => p,
-            _ => {
-                let p = Plane::new(lat, lon, 0.0);
-                a.motion_plane = Some(p);
-                a.motion.restart();
-                p
-            }
-        };
-        let en = plane.to_en(lat, lon);
-        a.motion_state = a.motion.push(Fix2 { pos: Vector2::new(en[0], en[1]), cov });
-    }
-
     /// The variational-Bayes noise scale of a source's measurements of an
     /// aircraft (1: as good as they claim): from its single-source track when
     /// those are kept, else from the fused track.
@@ -668,104 +566,6 @@ impl Fuser {
     pub fn finish(&mut self, out: &mut Vec<Output>) {
         while let Some((_, addr)) = self.held.pop_front() {
             self.release(addr, f64::INFINITY, out);
-        }
-    }
-
-    fn publish(&mut self, addr: u32, out: &mut Vec<Output>) {
-        let Some(a) = self.aircraft.get_mut(&addr) else {
-            return;
-        };
-        let Some(t) = a.pending.take() else {
-            return;
-        };
-        let period = a.period_s(&self.tcfg);
-        let window = self.cfg.sources_window_s;
-        // Time since the source's newest position.
-        let age = |s: Source| t - a.last_source_t[s as usize];
-        let sources = [Source::Adsb, Source::Mlat].into_iter().filter(|&s| age(s) <= window).collect();
-        // A coasting single-source track (no position lately) is not fused.
-        let coast = self.tcfg.coast_after_s;
-        let confirmed = |s: Source| a.single[s as usize].stage == Stage::Confirmed;
-        let taken = std::mem::take(&mut a.taken);
-        // Asked now, a track answers as it did at `t` from its history, or
-        // nothing once its history no longer reaches back that far.
-        let as_taken = |track: &Track, est: Option<Estimate>| {
-            debug_assert!(track.estimate_at(t).is_none_or(|now| Some(now) == est), "estimate at {t}");
-            est
-        };
-        let single = |s: Source| {
-            let est = as_taken(&a.single[s as usize], taken.single[s as usize]);
-            est.filter(|_| age(s) <= coast && confirmed(s))
-        };
-        let (adsb, mlat) = (single(Source::Adsb), single(Source::Mlat));
-        // A confirmed track whose source is still heard of (within the
-        // sources window) but whose newest position is older than the
-        // coasting limit: predicting it that far is not aligning it.
-        let stale = |s: Source| confirmed(s) && age(s) > coast && age(s) <= window;
-        let fused = match self.cfg.method {
-            Method::Measurement => as_taken(&a.fused, taken.fused),
-            method => match (adsb.filter(|_| !a.adsb_suspect), mlat) {
-                (Some(x), Some(y)) => match methods::fuse(
-                    method,
-                    &x,
-                    &y,
-                    Some(&a.cross.at(t, |dt| self.spec.models[0].transition(dt))),
-                ) {
-                    Some(f) => Some(f),
-                    None => {
-                        self.stats.fusion_fallbacks += 1;
-                        Some(methods::better(&x, &y))
-                    }
-                },
-                (x, y) => {
-                    // (ADS-B left out as suspect is left out on purpose.)
-                    let missing = if x.is_none() { Source::Adsb } else { Source::Mlat };
-                    let suspect = missing == Source::Adsb && a.adsb_suspect;
-                    if x.is_some() != y.is_some() && stale(missing) && !suspect {
-                        self.stats.fusion_fallbacks += 1;
-                    }
-                    x.or(y)
-                }
-            },
-        };
-        let report = |source: TrackSource, est: Estimate, sources: Sources| TrackReport {
-            id: a.id,
-            addr,
-            source,
-            est,
-            alt_baro_ft: a.alt_baro_ft,
-            sources,
-            nac_p: a.nac_p,
-            period_s: period,
-            motion: a.motion_state,
-            adsb_suspect: a.adsb_suspect,
-            flight: a.flight.clone(),
-            squawk: a.squawk,
-            nav_altitude_ft: a.nav_altitude_ft,
-            sparse: false,
-            ages_s: [Source::Adsb, Source::Mlat].map(|s| Some(age(s).max(0.0)).filter(|age| *age <= window)),
-        };
-        if let Some(est) = fused {
-            out.push(Output::Track(Box::new(report(TrackSource::Fused, est, sources))));
-            self.stats.published += 1;
-        }
-        if self.publish_source_tracks {
-            for (s, est) in [(Source::Adsb, adsb), (Source::Mlat, mlat)] {
-                if let Some(est) = est {
-                    out.push(Output::Track(Box::new(report(s.into(), est, smallvec::smallvec![s]))));
-                }
-            }
-        }
-    }
-}
-
-impl Aircraft {
-    /// The sampling period in force: the NACp table's, the densest in conflict.
-    fn period_s(&self, cfg: &TrackConfig) -> f64 {
-        if self.in_conflict {
-            cfg.densest_period_s()
-        } else {
-            cfg.period_s(self.nac_p)
         }
     }
 }
