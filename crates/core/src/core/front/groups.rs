@@ -1,0 +1,90 @@
+//! A transmission's group, handed out once its wait is over: to the
+//! multilateration engine, its outcome to the tracker (a fix as a position
+//! with its sync share, time differences), to the conformance monitor, and
+//! to the network delay of receivers dated by arrival.
+
+use super::*;
+
+/// The least share of a fix's timing variance counted as independent of
+/// its aircraft's ADS-B (a 100-fold inflation at most).
+const MIN_INDEPENDENT_SHARE: f64 = 0.01;
+
+impl GroupCtx<'_> {
+    pub(super) fn on_group(&mut self, g: &Group, now: f64, cmds: &mut Vec<Cmd>) {
+        self.learn_delay(g);
+        let fix = match self.mlat.on_group(g, now) {
+            GroupOutcome::Fix(fix) => fix,
+            GroupOutcome::Tdoa(t) => return cmds.push(Cmd::Tdoa { g: t, now }),
+            // Counted by the engine.
+            GroupOutcome::NoFix(_) => return,
+        };
+        self.stats.fixes += 1;
+        let c = fix.cov_en;
+        // Synchronisation errors persist from fix to fix; a filter that took
+        // them as white would average them away and claim too much.
+        let inflation = 1.0 + fix.sync_share * (self.sync_inflation - 1.0);
+        // What clocks synchronised on this aircraft's own ADS-B put in the
+        // fix is its ADS-B errors again: only the rest is news to a track
+        // that has its ADS-B, so only the rest is counted.
+        let own = inflation / (1.0 - fix.self_sync_share).max(MIN_INDEPENDENT_SHARE);
+        let m = Measurement {
+            t: fix.t,
+            source: Source::Mlat,
+            obs: Observation::Position {
+                lat: fix.lat,
+                lon: fix.lon,
+                cov_en: nalgebra::Matrix2::new(c[0][0], c[0][1], c[1][0], c[1][1]) * own,
+                // Heights come from altitude reports: a fix's own height is
+                // either the barometric one it was given, or (without one)
+                // so poorly determined that its linearised sigma cannot be
+                // trusted (hundreds of metres off at 20 m sigma on the surface).
+                height: None,
+                time_sigma_s: 0.0,
+                surface: false,
+                claimed: true,
+            },
+        };
+        let (addr, t) = (fix.addr, fix.t);
+        // The same transmission's ADS-B position against its fix, when the
+        // fix has redundancy and fits its own timing.
+        let pair = g.info.report.filter(|_| fix.dof >= 1 && fix.chi2 <= 3.0).map(|(lat, lon, sigma)| {
+            (crate::track::plane::Plane::new(lat, lon, 0.0).to_en(fix.lat, fix.lon), sigma)
+        });
+        cmds.push(Cmd::Event(Event::Mlat(fix)));
+        if let Some((d, sigma)) = pair {
+            let v = sigma * sigma;
+            let s = [
+                [v + c[0][0] * inflation, c[0][1] * inflation],
+                [c[1][0] * inflation, v + c[1][1] * inflation],
+            ];
+            self.stats.conformance_checks += 1;
+            let w =
+                self.watched.entry(addr).or_insert(Watched { monitor: Monitor::default(), last_heard: now });
+            w.last_heard = now;
+            if let Some(suspect) = w.monitor.push(self.conformance, d, s) {
+                let (offset_m, nis) = (w.monitor.last_offset_m, w.monitor.last_nis);
+                cmds.push(Cmd::Suspect { addr, t, suspect, offset_m, nis });
+            }
+        }
+        cmds.push(Cmd::Measure { addr, nac_p: None, m, now });
+    }
+
+    /// A transmission whose first copy (the one decoded and reported) came
+    /// from a receiver dated by arrival, also heard by a GPS-timed one: how
+    /// late that first copy arrived. Only first copies are learnt from: the
+    /// reports are theirs, and the first of several copies is the least
+    /// delayed.
+    fn learn_delay(&mut self, g: &Group) {
+        let first = g.copies[0];
+        if !self.receivers[first.rx].arrival_dated {
+            return;
+        }
+        let exact = g.copies[1..].iter().find_map(|c| {
+            (self.receivers[c.rx].decl.clock == ClockKind::Gps && crate::feed::has_timing(c.timestamp))
+                .then(|| ClockKind::gps_unix(c.timestamp, c.arrival))
+        });
+        if let Some(t) = exact {
+            self.receivers[first.rx].delay.push(first.arrival - t);
+        }
+    }
+}
