@@ -401,7 +401,8 @@ pub fn run(cfg: &Config, path: Option<&Path>, capture: Option<&Path>, output: Op
             // Live: the daemon's inputs, with the frames put on NATS.
             let sink = crate::live::Sink::Cluster(nats.clone(), cluster.clone());
             let (path, cfg) = (path.context("live ingest needs --config")?.to_path_buf(), cfg.clone());
-            tasks.spawn(async move { crate::live::serve(path, cfg, Some(sink)).await });
+            let (shutdown, reloads) = crate::live::signals(path)?;
+            tasks.spawn(async move { crate::live::serve(cfg, Some(sink), shutdown, reloads).await });
         }
         if cluster.has(Role::Clock) {
             let (nats, cluster, mlat) = (nats.clone(), cluster.clone(), cfg.core.mlat.clone());

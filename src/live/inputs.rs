@@ -196,13 +196,15 @@ pub async fn bind_all(inputs: &[InputConfig]) -> Result<Vec<Bound>, String> {
 }
 
 /// Spawns the task of one input on its bound socket.
+/// It ends when `shutdown` fires (a TCP server's connections with it).
 pub fn spawn(
     input: InputConfig,
     bound: Bound,
     tx: SyncSender<ToCore>,
     reg: Arc<Registry>,
+    shutdown: &super::shutdown::Shutdown,
 ) -> tokio::task::JoinHandle<()> {
-    tokio::spawn(async move {
+    shutdown.spawn(async move {
         let r = match bound {
             Bound::Client => tcp_client(&input, &tx, &reg).await,
             Bound::Listener(l) => super::server::tcp_server(&input, l, tx, reg.clone()).await,

@@ -323,7 +323,8 @@ mod tests {
         let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
         rt.block_on(async {
             let bound = inputs::bind(&input).await.unwrap();
-            let task = inputs::spawn(input, bound, tx, reg.clone());
+            let (stopper, shutdown) = crate::live::shutdown::Stopper::new();
+            let task = inputs::spawn(input, bound, tx, reg.clone(), &shutdown);
             tokio::time::sleep(Duration::from_millis(50)).await;
             let mut id = Vec::new();
             crate::feed::beast::encode_receiver_id(0x0102_0304_0506_0708, &mut id);
@@ -343,7 +344,8 @@ mod tests {
                 s.shutdown().await.unwrap();
                 tokio::time::sleep(Duration::from_millis(100)).await;
             }
-            task.abort();
+            stopper.stop();
+            let _ = task.await;
         });
         let mut got: Vec<(usize, usize)> = Vec::new();
         for m in core.try_iter() {
@@ -384,7 +386,8 @@ mod tests {
         let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
         rt.block_on(async {
             let bound = inputs::bind(&input).await.unwrap();
-            let task = inputs::spawn(input, bound, tx, reg.clone());
+            let (stopper, shutdown) = crate::live::shutdown::Stopper::new();
+            let task = inputs::spawn(input, bound, tx, reg.clone(), &shutdown);
             tokio::time::sleep(Duration::from_millis(50)).await;
             // Ten idle strangers from one address: four wait to name
             // themselves, six are closed at once.
@@ -428,7 +431,7 @@ mod tests {
             assert!(closed(&mut late).await);
             assert!(!closed(&mut moved).await, "a kept receiver was closed");
             // The input itself removed: its connections end with it.
-            task.abort();
+            stopper.stop();
             let _ = task.await;
             assert!(closed(&mut moved).await);
         });

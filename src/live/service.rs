@@ -1,0 +1,350 @@
+//! The service's life on the async runtime, shaped like mini-redis's
+//! server: [`serve`] takes the configuration, a shutdown future and a
+//! stream of re-read configurations, so that the signals (see
+//! [`signals`]) are an adapter around it and a test can drive it
+//! in-process. Every task it starts is handed a [`Shutdown`] and ends
+//! itself when told; the inputs have a stopper of their own, because a
+//! reload replaces them.
+
+use std::future::Future;
+use std::path::PathBuf;
+use std::sync::mpsc::{sync_channel, SyncSender};
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::{bail, Context, Result};
+use tokio::sync::mpsc;
+use tokio::task::JoinHandle;
+
+use super::config::InputConfig;
+use super::inputs::{self, Registry};
+use super::outputs::Outputs;
+use super::record::{self, Recorder};
+use super::shutdown::{self, Shutdown, Stopper};
+use super::{http, replay, stages, stream_out, unix_now, web, Sink, ToCore};
+use crate::config::Config;
+use crate::core::front::KnownReceiver;
+
+/// How long the service's tasks have to end once told (inputs close their
+/// connections, the HTTP server its own).
+const TASKS_STOP: Duration = Duration::from_secs(2);
+
+/// SIGTERM and SIGINT as the service's shutdown, SIGHUP as the
+/// configuration file `path` read again: what [`serve`] takes. A file that
+/// does not load is refused (said in the log and to systemd) and the
+/// service keeps the configuration it has.
+pub fn signals(path: PathBuf) -> Result<(impl Future<Output = ()>, mpsc::Receiver<Config>)> {
+    use tokio::signal::unix::{signal, SignalKind};
+    let mut term = signal(SignalKind::terminate())?;
+    let mut hup = signal(SignalKind::hangup())?;
+    let (reload, reloads) = mpsc::channel(1);
+    tokio::spawn(async move {
+        while hup.recv().await.is_some() {
+            // systemd shows the state of a reload (`systemctl status`);
+            // the unit's ExecReload checks the file first, so a
+            // configuration refused fails `systemctl reload` itself.
+            let _ = sd_notify::notify(&[sd_notify::NotifyState::Reloading]);
+            match Config::load(&path) {
+                Ok(new) => {
+                    if reload.send(new).await.is_err() {
+                        break;
+                    }
+                }
+                Err(e) => {
+                    tracing::error!("SIGHUP: configuration refused, keeping the old one:\n{e:#}");
+                    let status = "running on the old configuration: the new one was refused (see the log)";
+                    let _ = sd_notify::notify(&[
+                        sd_notify::NotifyState::Ready,
+                        sd_notify::NotifyState::Status(status),
+                    ]);
+                }
+            }
+        }
+    });
+    let shutdown = async move {
+        tokio::select! {
+            _ = term.recv() => {}
+            _ = tokio::signal::ctrl_c() => {}
+        }
+    };
+    Ok((shutdown, reloads))
+}
+
+/// The inputs running: their tasks and the stopper that ends them.
+struct RunningInputs {
+    stopper: Option<Stopper>,
+    tasks: Vec<JoinHandle<()>>,
+}
+
+impl RunningInputs {
+    fn start(
+        list: &[InputConfig],
+        bound: Vec<inputs::Bound>,
+        tx: &SyncSender<ToCore>,
+        reg: &Arc<Registry>,
+    ) -> Self {
+        let (stopper, shutdown) = Stopper::new();
+        let tasks = list
+            .iter()
+            .zip(bound)
+            .map(|(i, b)| inputs::spawn(i.clone(), b, tx.clone(), reg.clone(), &shutdown))
+            .collect();
+        RunningInputs { stopper: Some(stopper), tasks }
+    }
+
+    fn none() -> Self {
+        RunningInputs { stopper: None, tasks: Vec::new() }
+    }
+
+    /// Tells them to stop and waits until they have (their ports free).
+    async fn stop(self) {
+        drop(self.stopper);
+        let late = shutdown::join_all(self.tasks, TASKS_STOP).await;
+        if late > 0 {
+            tracing::warn!(inputs = late, "inputs still running after being told to stop");
+        }
+    }
+}
+
+/// The service on `cfg` until `shutdown` completes; each configuration from
+/// `reloads` applied in turn (receivers, inputs and outputs replaced, the
+/// core and its tracks kept). Its frames go to `sink` (a core when `None`).
+pub async fn serve(
+    cfg: Config,
+    sink: Option<Sink>,
+    shutdown: impl Future<Output = ()>,
+    mut reloads: mpsc::Receiver<Config>,
+) -> Result<()> {
+    let ingest_only = matches!(sink, Some(Sink::Cluster(..)));
+    let cfg = for_sink(cfg, ingest_only);
+    let registry = Arc::new(Registry { queue_frames: cfg.service.queue_frames, ..Default::default() });
+    // Everything but the inputs stops at the end (a reload replaces those).
+    let (stop_rest, rest) = Stopper::new();
+    let (mut tasks, web) = start_http(&cfg, &registry, &rest).await?;
+    // Every message holds a frame or more: the frames' bound bites first.
+    let (tx, rx) = sync_channel::<ToCore>(cfg.service.queue_frames);
+    let mut core_cfg = cfg.core.clone();
+    core_cfg.publish_source_tracks = cfg.publish_source_tracks;
+    let mut decls = Vec::new();
+    for r in &cfg.receiver {
+        registry.add(r.clone());
+        decls.push(r.known());
+    }
+    let (mut streams, failed) = stream_out::start_all(&cfg.output, &[]).await;
+    if let Some((n, e)) = failed.into_iter().next() {
+        bail!("[[output]] {n} cannot start: {e}");
+    }
+    let outputs = Outputs::new(&cfg.output, &cfg.service, &streams);
+    let recorder = match &cfg.service.record {
+        None => None,
+        Some(p) => {
+            let limits = record::RecordLimits {
+                path: p.clone(),
+                max_bytes: cfg.service.record_max_bytes,
+                max_age_s: cfg.service.record_max_age_s,
+                keep: cfg.service.record_keep,
+            };
+            Some(
+                Recorder::open(limits, unix_now())
+                    .with_context(|| format!("cannot create the recording {}", p.display()))?,
+            )
+        }
+    };
+    let stats_every = cfg.service.stats_interval_s;
+    let state_file = cfg.service.state_file.clone();
+    // Every port bound before anything runs: one that is taken (another
+    // daemon, a stale instance) fails the start, where systemd shows it.
+    let bound = inputs::bind_all(&cfg.input).await.map_err(anyhow::Error::msg)?;
+    let reg = registry.clone();
+    let core_thread = match sink {
+        None | Some(Sink::Core) => {
+            let setup = stages::Setup {
+                receivers: decls,
+                outputs,
+                recorder,
+                registry: reg,
+                stats_every,
+                state_file,
+                web,
+            };
+            stages::start(&core_cfg, setup, rx)?
+        }
+        Some(Sink::Cluster(nats, cluster)) => {
+            let (out, publish) = tokio::sync::mpsc::channel(16);
+            tokio::spawn(async move {
+                if let Err(e) = crate::cluster::ingest::publish_live(&nats, publish).await {
+                    tracing::error!("ingest: {e:#}");
+                }
+            });
+            for KnownReceiver { decl, .. } in decls {
+                let _ = tx.send(ToCore::AddReceiver(decl));
+            }
+            std::thread::Builder::new()
+                .name("ingest".into())
+                .spawn(move || crate::cluster::ingest::live_sink(rx, reg, out, cluster))?
+        }
+    };
+
+    let mut running = RunningInputs::start(&cfg.input, bound, &tx, &registry);
+    let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
+    tracing::info!(
+        inputs = cfg.input.len(),
+        outputs = cfg.output.len(),
+        receivers = cfg.receiver.len(),
+        "running"
+    );
+    // Apart from the inputs' tasks: a reload that replaces the inputs must
+    // not end the demo's replay.
+    if let Some(capture) = cfg.service.demo_capture.clone() {
+        let (speed, demo_cfg) = (cfg.service.demo_speed, cfg.clone());
+        tasks.push(rest.spawn(async move {
+            match replay::replay(&capture, &demo_cfg, speed).await {
+                Ok(n) => tracing::info!(frames = n, "demo replay finished"),
+                Err(e) => tracing::error!("demo replay: {e:#}"),
+            }
+        }));
+    }
+
+    tokio::pin!(shutdown);
+    let mut current = cfg;
+    let mut reloading = true;
+    loop {
+        tokio::select! {
+            () = &mut shutdown => break,
+            new = reloads.recv(), if reloading => {
+                let Some(new) = new.map(|c| for_sink(c, ingest_only)) else {
+                    // No more reloads can come: the service runs on.
+                    reloading = false;
+                    continue;
+                };
+                let left_out = reload(&new, &current, &registry, &tx, &mut running, &mut streams).await;
+                current = new;
+                let status = match left_out {
+                    0 => "running; configuration re-read".to_string(),
+                    n => format!("running; configuration re-read, {n} input(s) could not bind (see the log)"),
+                };
+                let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready, sd_notify::NotifyState::Status(&status)]);
+            }
+        }
+    }
+    tracing::info!("stopping");
+    running.stop().await;
+    stop_rest.stop();
+    let late = shutdown::join_all(tasks, TASKS_STOP).await;
+    if late > 0 {
+        tracing::warn!(tasks = late, "tasks still running at the stop");
+    }
+    let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
+    let _ = tx.send(ToCore::Shutdown);
+    drop(tx);
+    let _ = tokio::task::spawn_blocking(move || core_thread.join()).await;
+    Ok(())
+}
+
+/// A cluster's ingest puts frames on NATS and makes no tracks: the outputs
+/// and the map are its publisher's (which may share the process and its
+/// ports), the metrics endpoint stays.
+fn for_sink(cfg: Config, ingest_only: bool) -> Config {
+    if !ingest_only {
+        return cfg;
+    }
+    let http = crate::live::config::HttpConfig { listen: None, ..cfg.http };
+    Config { output: Vec::new(), http, ..cfg }
+}
+
+/// The Prometheus endpoint and the HTTP server, each bound before anything
+/// runs (a taken port fails the start); the documents the HTTP server hands
+/// out, for the tracker thread to render, when it is on.
+pub(crate) async fn start_http(
+    cfg: &Config,
+    registry: &Arc<Registry>,
+    shutdown: &Shutdown,
+) -> Result<(Vec<JoinHandle<()>>, Option<Arc<web::WebData>>)> {
+    let (metrics_at, http_at) = (cfg.service.metrics_listen, cfg.http.listen);
+    let mut tasks = Vec::new();
+    if metrics_at.is_none() && http_at.is_none() {
+        return Ok((tasks, None));
+    }
+    let handle = metrics_exporter_prometheus::PrometheusBuilder::new()
+        .install_recorder()
+        .context("cannot start the Prometheus recorder")?;
+    if let Some(addr) = metrics_at {
+        let listener = tokio::net::TcpListener::bind(addr)
+            .await
+            .with_context(|| format!("the Prometheus endpoint cannot bind {addr}"))?;
+        let routes = http::Routes { metrics: Some(handle.clone()), web: None };
+        let counters = registry.metrics_http.clone();
+        tasks.push(shutdown.spawn(http::serve(listener, routes, counters, http::METRICS_CONNECTIONS)));
+        tracing::info!(address = %addr, "Prometheus metrics");
+    }
+    let Some(addr) = http_at else { return Ok((tasks, None)) };
+    let listener = tokio::net::TcpListener::bind(addr)
+        .await
+        .with_context(|| format!("the HTTP server ([http] listen) cannot bind {addr}"))?;
+    let data =
+        Arc::new(web::WebData::new(cfg.http.map_tiles.as_deref(), cfg.http.map_attribution.as_deref()));
+    let routes = http::Routes { metrics: Some(handle), web: Some(data.clone()) };
+    tasks.push(shutdown.spawn(http::serve(
+        listener,
+        routes,
+        registry.http.clone(),
+        cfg.http.max_connections,
+    )));
+    tracing::info!(address = %addr, "HTTP: the map at /, /data/aircraft.json, /data/receivers.json, /metrics");
+    Ok((tasks, Some(data)))
+}
+
+/// Applies a re-read configuration (SIGHUP): receivers added, updated and
+/// revoked; outputs replaced; inputs, if changed, closed and bound anew.
+/// Returns how many new inputs could not bind (said in the log; the
+/// service goes on without them).
+async fn reload(
+    new: &Config,
+    current: &Config,
+    registry: &Arc<Registry>,
+    tx: &std::sync::mpsc::SyncSender<ToCore>,
+    running: &mut RunningInputs,
+    streams: &mut Vec<Arc<stream_out::Stream>>,
+) -> usize {
+    // New receivers added, known ones updated in place, removed ones
+    // revoked (their connections closed).
+    for r in registry.reconfigure(&new.receiver) {
+        let _ = tx.send(ToCore::AddReceiver(r.decl()));
+    }
+    // Logged once the receivers are in place (tests wait for it).
+    tracing::info!("SIGHUP: configuration re-read");
+    // Their ports are bound, and the map's settings served, once, at start.
+    if new.http != current.http || new.service.metrics_listen != current.service.metrics_listen {
+        tracing::warn!("SIGHUP: [http] and metrics_listen take effect at the next start");
+    }
+    let (started, failed) = stream_out::start_all(&new.output, streams).await;
+    for (n, e) in failed {
+        tracing::error!("SIGHUP: [[output]] {n} cannot start: {e}; going on without it");
+    }
+    *streams = started;
+    let _ = tx.send(ToCore::Outputs(Outputs::new(&new.output, &new.service, streams)));
+    if new.input == current.input {
+        return 0;
+    }
+    // Closed before the new ones bind the same ports.
+    std::mem::replace(running, RunningInputs::none()).stop().await;
+    // Each input that binds runs; one that cannot is said and left out,
+    // the daemon going on with the rest.
+    let (mut ok, mut bound) = (Vec::new(), Vec::new());
+    for (n, i) in new.input.iter().enumerate() {
+        match inputs::bind(i).await {
+            Ok(b) => {
+                ok.push(i.clone());
+                bound.push(b);
+            }
+            Err(e) => tracing::error!(
+                "SIGHUP: input {} ({}) cannot bind {}: {e}; running without it",
+                n + 1,
+                i.kind.name(),
+                i.address
+            ),
+        }
+    }
+    *running = RunningInputs::start(&ok, bound, tx, registry);
+    new.input.len() - ok.len()
+}
