@@ -416,6 +416,7 @@ fn one() -> u32 {
 }
 
 /// Every problem of the live part, one per line.
+// Over 80 lines: a flat list of independent checks, one per field.
 pub fn validate(
     service: &ServiceConfig,
     receivers: &[ReceiverConfig],

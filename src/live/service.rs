@@ -8,7 +8,7 @@
 
 use std::future::Future;
 use std::path::PathBuf;
-use std::sync::mpsc::{sync_channel, SyncSender};
+use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -135,55 +135,19 @@ pub async fn serve(
         bail!("[[output]] {n} cannot start: {e}");
     }
     let outputs = Outputs::new(&cfg.output, &cfg.service, &streams);
-    let recorder = match &cfg.service.record {
-        None => None,
-        Some(p) => {
-            let limits = record::RecordLimits {
-                path: p.clone(),
-                max_bytes: cfg.service.record_max_bytes,
-                max_age_s: cfg.service.record_max_age_s,
-                keep: cfg.service.record_keep,
-            };
-            Some(
-                Recorder::open(limits, unix_now())
-                    .with_context(|| format!("cannot create the recording {}", p.display()))?,
-            )
-        }
+    let setup = stages::Setup {
+        receivers: decls,
+        outputs,
+        recorder: open_recorder(&cfg.service)?,
+        registry: registry.clone(),
+        stats_every: cfg.service.stats_interval_s,
+        state_file: cfg.service.state_file.clone(),
+        web,
     };
-    let stats_every = cfg.service.stats_interval_s;
-    let state_file = cfg.service.state_file.clone();
     // Every port bound before anything runs: one that is taken (another
     // daemon, a stale instance) fails the start, where systemd shows it.
     let bound = inputs::bind_all(&cfg.input).await.map_err(anyhow::Error::msg)?;
-    let reg = registry.clone();
-    let core_thread = match sink {
-        None | Some(Sink::Core) => {
-            let setup = stages::Setup {
-                receivers: decls,
-                outputs,
-                recorder,
-                registry: reg,
-                stats_every,
-                state_file,
-                web,
-            };
-            stages::start(&core_cfg, setup, rx)?
-        }
-        Some(Sink::Cluster(nats, cluster)) => {
-            let (out, publish) = tokio::sync::mpsc::channel(16);
-            tokio::spawn(async move {
-                if let Err(e) = crate::cluster::ingest::publish_live(&nats, publish).await {
-                    tracing::error!("ingest: {e:#}");
-                }
-            });
-            for KnownReceiver { decl, .. } in decls {
-                let _ = tx.send(ToCore::AddReceiver(decl));
-            }
-            std::thread::Builder::new()
-                .name("ingest".into())
-                .spawn(move || crate::cluster::ingest::live_sink(rx, reg, out, cluster))?
-        }
-    };
+    let core_thread = start_sink(sink, &core_cfg, setup, &tx, rx)?;
 
     let mut running = RunningInputs::start(&cfg.input, bound, &tx, &registry);
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
@@ -239,6 +203,49 @@ pub async fn serve(
     drop(tx);
     let _ = tokio::task::spawn_blocking(move || core_thread.join()).await;
     Ok(())
+}
+
+/// The recording `[service] record` asks for, opened.
+fn open_recorder(service: &super::config::ServiceConfig) -> Result<Option<Recorder>> {
+    let Some(p) = &service.record else { return Ok(None) };
+    let limits = record::RecordLimits {
+        path: p.clone(),
+        max_bytes: service.record_max_bytes,
+        max_age_s: service.record_max_age_s,
+        keep: service.record_keep,
+    };
+    let recorder = Recorder::open(limits, unix_now())
+        .with_context(|| format!("cannot create the recording {}", p.display()))?;
+    Ok(Some(recorder))
+}
+
+/// Where the inputs' frames go, started: the core's two threads, or a
+/// cluster's ingest thread (which declares the receivers through `tx` and
+/// puts their frames on NATS). The thread that ends once `tx` is dropped.
+fn start_sink(
+    sink: Option<Sink>,
+    core_cfg: &crate::core::CoreConfig,
+    setup: stages::Setup,
+    tx: &SyncSender<ToCore>,
+    rx: Receiver<ToCore>,
+) -> Result<std::thread::JoinHandle<()>> {
+    let Some(Sink::Cluster(nats, cluster)) = sink else {
+        return Ok(stages::start(core_cfg, setup, rx)?);
+    };
+    let (out, publish) = mpsc::channel(16);
+    tokio::spawn(async move {
+        if let Err(e) = crate::cluster::ingest::publish_live(&nats, publish).await {
+            tracing::error!("ingest: {e:#}");
+        }
+    });
+    for KnownReceiver { decl, .. } in setup.receivers {
+        let _ = tx.send(ToCore::AddReceiver(decl));
+    }
+    let reg = setup.registry;
+    let thread = std::thread::Builder::new()
+        .name("ingest".into())
+        .spawn(move || crate::cluster::ingest::live_sink(rx, reg, out, cluster))?;
+    Ok(thread)
 }
 
 /// A cluster's ingest puts frames on NATS and makes no tracks: the outputs

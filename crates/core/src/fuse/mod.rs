@@ -267,6 +267,8 @@ impl Fuser {
     }
 
     /// A measurement of aircraft `addr`, at arrival time `now`.
+    // Over 80 lines: the per-measurement checks and the MLAT hold's
+    // branches, in the order they apply.
     pub fn on_measurement(
         &mut self,
         addr: u32,

@@ -6,6 +6,8 @@
 use super::*;
 
 impl Fuser {
+    // Over 80 lines: the per-measurement sequence (tracks, fusion's
+    // cross-covariance, counters, motion test, publication due).
     pub(super) fn apply_to_tracks(&mut self, addr: u32, m: Measurement) {
         let Some(a) = self.aircraft.get_mut(&addr) else {
             return;

@@ -238,6 +238,8 @@ pub fn chi2_quantile(dof: usize, q: f64) -> f64 {
 }
 
 /// Solves for the emitter. `guess` (ECEF) is tried first when given.
+// Over 80 lines, kept whole: start, Levenberg-Marquardt iterations and
+// covariance share the stack matrices of one solve on the per-fix path.
 pub fn solve(
     ms: &[Measurement],
     alt: Option<AltitudeConstraint>,

@@ -219,6 +219,8 @@ impl ClockSync {
     /// innovation (each capped at 100) of the pair measurements that met a
     /// converged filter, and how many those were, so the caller can judge the
     /// emitter too.
+    // Over 80 lines, kept whole: each pair of a sync message's copies
+    // against its filter, sharing the copies' stack arrays (per group).
     pub fn observe(
         &mut self,
         copies: &[LocalCopy],
@@ -452,6 +454,8 @@ impl ClockSync {
     /// whichever GPS receiver it is reached. Returns, per copy index, that
     /// time and the accumulated variance of the conversion; copies the tree
     /// cannot reach are `None`. Also returns the root's copy index.
+    // Over 80 lines, kept whole: one walk of the clock tree per group (the
+    // per-group path), its parts sharing the walk's stack arrays.
     pub fn common_time(&self, copies: &[LocalCopy], now: f64) -> (GroupVec<Option<(f64, f64)>>, usize) {
         let n = copies.len();
         let mut out: GroupVec<Option<(f64, f64)>> = smallvec::smallvec![None; n];

@@ -216,6 +216,8 @@ impl Decoder {
 
     /// As [`Self::decode`], for a frame heard by a receiver at `reference`
     /// (several receivers share one decoder in the processing core).
+    // Over 80 lines, kept whole: the decoder's per-frame pass, whose steps
+    // share the parsed frame and the aircraft's entry, looked up once.
     pub fn decode_at(
         &mut self,
         frame: &RawFrame,
@@ -427,6 +429,8 @@ fn max_speed_kt(surface: bool, gs_kt: Option<f64>) -> f64 {
 }
 
 #[allow(clippy::too_many_arguments)]
+// Over 80 lines, kept whole: one decision (which CPR pair, which
+// reference, which check) whose branches read the same candidates.
 fn resolve(
     ac: &mut Aircraft,
     stats: &mut DecodeStats,

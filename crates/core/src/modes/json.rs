@@ -78,6 +78,7 @@ pub(crate) fn round(v: f64, decimals: i32) -> f64 {
 }
 
 impl DecodeRecord {
+    // Over 80 lines: one field of the decoded record after another.
     pub fn new(d: &Decoded, frame: &RawFrame) -> Self {
         let m = &d.msg;
         let mut r = DecodeRecord {

@@ -220,6 +220,7 @@ impl Default for TrackConfig {
 
 impl TrackConfig {
     /// Every problem at once, one per line.
+    // Over 80 lines: a flat list of independent checks, one per field.
     pub fn validate(&self) -> Result<(), String> {
         let mut errs = Vec::new();
         if self.models.is_empty() {

@@ -11,6 +11,7 @@ impl Front {
     /// `timing`: the frame's time of applicability, for extended squitters;
     /// `correction`: what makes its barometric altitude a height (the one the
     /// MLAT solver is given).
+    // Over 80 lines: one match over the message kinds, each arm a few lines.
     pub(super) fn feed_tracker(
         &mut self,
         cmds: &mut Vec<Cmd>,

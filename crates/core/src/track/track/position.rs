@@ -9,6 +9,8 @@ use super::*;
 
 impl Track {
     #[allow(clippy::too_many_arguments)]
+    // Over 80 lines, kept whole: one measurement's model, gate and update
+    // on the per-measurement path, sharing the prediction.
     pub(super) fn position(
         &mut self,
         t: f64,
