@@ -9,6 +9,7 @@
 
 pub mod config;
 pub mod estimate;
+pub mod gate;
 pub mod imm;
 pub mod kf;
 pub mod measurement;

@@ -40,6 +40,7 @@ use nalgebra::{Matrix2, Matrix6, Vector2, Vector6};
 use super::config::TrackConfig;
 use super::estimate::at_aircraft;
 pub use super::estimate::{transfer, Estimate, Kinematics};
+use super::gate::Gate;
 use super::imm::{Imm, ImmSpec};
 use super::kf::{self, Gaussian, Linear};
 pub use super::measurement::{Measurement, Observation, Outcome, Source};
@@ -161,7 +162,7 @@ pub struct Track {
     /// first ran.
     specs: SmallVec<[(f64, Arc<ImmSpec>); 2]>,
     cfg: Arc<TrackConfig>,
-    gate: f64,
+    gate: Gate,
     state: State,
     /// Measurements within the reorder window, in time order, every
     /// `SNAPSHOT_EVERY`th (and always the oldest) with the state before it.
@@ -185,10 +186,7 @@ pub struct Track {
 
 impl Track {
     pub fn new(cfg: Arc<TrackConfig>, spec: Arc<ImmSpec>) -> Track {
-        // A chi-square with two degrees of freedom is an exponential of mean 2,
-        // so its quantile has a closed form; the general numerical inverse cost
-        // ten thousand instructions for every new track.
-        let gate = -2.0 * (1.0 - cfg.gate_probability).ln();
+        let gate = Gate::new(cfg.gate_probability);
         // Both sources start from the full prior: a light one let ADS-B's first
         // residuals (the velocity's, before the start-up rule) overshoot.
         let vb = [Vb::prior(cfg.vb_prior); 2];
@@ -413,7 +411,7 @@ impl Track {
                         // A velocity far outside the track's own: left out, not applied.
                         prep if {
                             let (nu, s) = prep.combined().innovation(&vm);
-                            s.try_inverse().is_none_or(|si| (nu.transpose() * si * nu)[0] > gate)
+                            !gate.admits(Gate::nis(&nu, &s))
                         } =>
                         {
                             Outcome::Gated
@@ -499,11 +497,10 @@ impl Track {
         imm: &mut Imm,
         prep: &super::imm::Prepared,
         m: &Linear<M>,
-        gate: f64,
+        gate: Gate,
     ) -> Option<f64> {
         let (nu, s) = prep.combined().innovation(m);
-        let nis = s.cholesky().map(|c| nu.dot(&c.solve(&nu)))?;
-        if nis > gate {
+        if !gate.admits(Gate::nis(&nu, &s)) {
             return None;
         }
         imm.update(prep, m).map(|s| s.nis)

@@ -52,7 +52,7 @@ fn the_gate_is_the_two_degree_chi_square_quantile() {
     let chi2 = ChiSquared::new(2.0).unwrap();
     for p in [0.9, 0.99, 0.9999, 0.999_999] {
         let cfg = Arc::new(TrackConfig { gate_probability: p, ..TrackConfig::default() });
-        let gate = Track::new(cfg.clone(), cfg.imm_spec()).gate;
+        let gate = Track::new(cfg.clone(), cfg.imm_spec()).gate.threshold();
         // statrs inverts its CDF by bisection to about 1e-6; the closed form is exact.
         assert!((gate / chi2.inverse_cdf(p) - 1.0).abs() < 1e-5, "{p}: {gate}");
         assert!((chi2.cdf(gate) - p).abs() < 1e-12, "{p}: {}", chi2.cdf(gate));

@@ -51,16 +51,15 @@ impl Track {
         let linear = |scale: f64| base.with_r(nominal * scale);
         let nis = {
             let (nu, s) = pred.innovation(&linear(vb.scale()));
-            s.try_inverse().map_or(f64::INFINITY, |si| (nu.transpose() * si * nu)[0])
+            Gate::nis(&nu, &s)
         };
-        // NaN (a degenerate innovation) is gated too.
-        if nis.is_nan() || nis > self.gate {
+        if !self.gate.admits(nis) {
             // What the innovation would teach the scale, no more than one on
             // the gate would: one wild position must not carry the scale past
             // the gate alone.
             let excess = self.cfg.vb.then(|| {
                 let (nu, _) = pred.innovation(&linear(1.0));
-                let nu = nu * (self.gate / nis).sqrt().min(1.0);
+                let nu = nu * (self.gate.threshold() / nis).sqrt().min(1.0);
                 let hph = h * pred.p * h.transpose();
                 (nom_inv * (nu * nu.transpose() - hph)).trace().max(0.0)
             });
