@@ -44,33 +44,110 @@ pub fn parse_toml<T: serde::de::DeserializeOwned>(text: &str, name: &str) -> Res
 }
 
 impl Config {
-    pub fn load(path: &Path) -> Result<Config> {
-        let (cfg, name): (Config, String) = load_toml(path)?;
-        cfg.validated(&name)
+    pub fn load(path: &Path) -> Result<Config, ConfigError> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| ConfigError::Read { file: file.clone(), source })?;
+        Config::parse(&text, &file)
     }
 
-    pub fn parse(text: &str, name: &str) -> Result<Config> {
-        parse_toml::<Config>(text, name)?.validated(name)
+    pub fn parse(text: &str, file: &str) -> Result<Config, ConfigError> {
+        let cfg: Config = toml::from_str(text)
+            .map_err(|e| ConfigError::Syntax { file: file.to_string(), message: e.to_string() })?;
+        cfg.validated(file)
     }
 
-    /// Every problem at once, each line naming the file and the table.
-    fn validated(self, name: &str) -> Result<Config> {
-        let mut errs: Vec<String> = Vec::new();
+    /// Every problem at once, each naming its table.
+    fn validated(self, file: &str) -> Result<Config, ConfigError> {
+        let mut problems: Vec<Problem> = Vec::new();
         if let Err(e) = self.core.validate() {
-            errs.extend(e.lines().map(|l| format!("[core] {l}")));
+            problems.extend(e.lines().map(Problem::of_core));
         }
-        errs.extend(crate::live::config::validate(&self.service, &self.receiver, &self.input, &self.output));
-        errs.extend(self.http.validate());
+        problems.extend(crate::live::config::validate(
+            &self.service,
+            &self.receiver,
+            &self.input,
+            &self.output,
+        ));
+        problems.extend(self.http.validate());
         if let Some(c) = &self.cluster {
-            errs.extend(c.validate().into_iter().map(|e| format!("[cluster] {e}")));
+            problems.extend(c.validate().into_iter().map(|e| Problem::new("[cluster]", e)));
         }
-        if errs.is_empty() {
+        if problems.is_empty() {
             Ok(self)
         } else {
-            Err(anyhow::anyhow!(
-                "{}",
-                errs.iter().map(|e| format!("{name}: {e}")).collect::<Vec<_>>().join("\n")
-            ))
+            Err(ConfigError::Invalid { file: file.to_string(), problems })
+        }
+    }
+}
+
+/// Why a configuration was refused.
+#[derive(Debug)]
+pub enum ConfigError {
+    /// The file could not be read.
+    Read { file: String, source: std::io::Error },
+    /// Not TOML of the configuration's shape (an unknown key, a misspelt
+    /// kind, a value of the wrong type): the parser's message, with the
+    /// line and column.
+    Syntax { file: String, message: String },
+    /// Values out of range or at odds with each other: every one at once.
+    Invalid { file: String, problems: Vec<Problem> },
+}
+
+/// One value refused: the table it is in and what is wrong with it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Problem {
+    /// `[service]`, `[core.track]`, `[[input]] 2`, `[[receiver]] 1 (rx1)`.
+    pub table: String,
+    /// What is wrong, naming the field (`stats_interval_s = -1 must be
+    /// positive`).
+    pub message: String,
+}
+
+impl Problem {
+    pub fn new(table: &str, message: impl Into<String>) -> Problem {
+        Problem { table: table.to_string(), message: message.into() }
+    }
+
+    /// A line of the core's validation: its own fields are `[core]`'s, a
+    /// sub-table's line names it (`[core.track] models[0]: ...`).
+    fn of_core(line: &str) -> Problem {
+        match line.strip_prefix('[').and_then(|l| l.split_once("] ")) {
+            Some((table, message)) if table.starts_with("core.") => {
+                Problem::new(&format!("[{table}]"), message)
+            }
+            _ => Problem::new("[core]", line),
+        }
+    }
+}
+
+impl std::fmt::Display for Problem {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        // An array's entry is named by its number: a colon sets it apart.
+        let sep = if self.table.starts_with("[[") { ": " } else { " " };
+        write!(f, "{}{sep}{}", self.table, self.message)
+    }
+}
+
+impl std::fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            // The reason is the source's (`{:#}` shows the chain).
+            ConfigError::Read { file, .. } => write!(f, "cannot read {file}"),
+            ConfigError::Syntax { file, message } => write!(f, "{file}: {message}"),
+            ConfigError::Invalid { file, problems } => {
+                let lines: Vec<String> = problems.iter().map(|p| format!("{file}: {p}")).collect();
+                write!(f, "{}", lines.join("\n"))
+            }
+        }
+    }
+}
+
+impl std::error::Error for ConfigError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            ConfigError::Read { source, .. } => Some(source),
+            _ => None,
         }
     }
 }
@@ -106,6 +183,28 @@ mod tests {
         documented.sort();
         fields.sort();
         assert_eq!(documented, fields, "config/fuse1090.toml must list every field");
+    }
+
+    #[test]
+    fn a_refused_configuration_says_why_by_kind_table_and_field() {
+        let text = "[service]\nstats_interval_s = -1\n\n[core.track]\ngate_probability = 2\n\n\
+                    [[input]]\nkind = \"beast_tcp_client\"\naddress = \"127.0.0.1:30005\"\n";
+        let Err(ConfigError::Invalid { file, problems }) = Config::parse(text, "bad.toml") else {
+            panic!("not refused as invalid");
+        };
+        assert_eq!(file, "bad.toml");
+        let at = |table: &str| problems.iter().find(|p| p.table == table).map(|p| p.message.clone());
+        assert_eq!(at("[service]").as_deref(), Some("stats_interval_s = -1 must be positive"));
+        assert!(at("[core.track]").is_some_and(|m| m.starts_with("gate_probability = 2")), "{problems:?}");
+        assert_eq!(at("[[input]] 1").as_deref(), Some("beast_tcp_client needs receiver"));
+        assert_eq!(problems.len(), 3, "{problems:?}");
+        let shown = Config::parse(text, "bad.toml").unwrap_err().to_string();
+        assert!(shown.contains("bad.toml: [[input]] 1: beast_tcp_client needs receiver"), "{shown}");
+        assert!(matches!(Config::parse("[core\n", "x.toml"), Err(ConfigError::Syntax { .. })));
+        let missing = Config::load(Path::new("/nonexistent/fuse1090.toml")).unwrap_err();
+        assert!(
+            matches!(&missing, ConfigError::Read { source, .. } if source.kind() == std::io::ErrorKind::NotFound)
+        );
     }
 
     #[test]

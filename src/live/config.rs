@@ -2,6 +2,7 @@
 //! outputs and operations. Checked as a whole: every problem is reported at
 //! once, each with the table it is in (`[[input]] 2: ...`).
 
+use crate::config::Problem;
 use std::net::{IpAddr, SocketAddr};
 use std::path::PathBuf;
 
@@ -101,17 +102,23 @@ impl Default for HttpConfig {
 }
 
 impl HttpConfig {
-    pub fn validate(&self) -> Vec<String> {
+    pub fn validate(&self) -> Vec<Problem> {
         let mut errs = Vec::new();
         if self.listen.is_some_and(|a| a.port() == 0) {
-            errs.push("[http] listen: port 0 is no port".into());
+            errs.push(Problem::new("[http]", "listen: port 0 is no port"));
         }
         if !(1..=10_000).contains(&self.max_connections) {
-            errs.push(format!("[http] max_connections = {} must be in 1..=10000", self.max_connections));
+            errs.push(Problem::new(
+                "[http]",
+                format!("max_connections = {} must be in 1..=10000", self.max_connections),
+            ));
         }
         if let Some(url) = &self.map_tiles {
             if !["{z}", "{x}", "{y}"].iter().all(|p| url.contains(p)) {
-                errs.push(format!("[http] map_tiles = {url:?} must contain {{z}}, {{x}} and {{y}}"));
+                errs.push(Problem::new(
+                    "[http]",
+                    format!("map_tiles = {url:?} must contain {{z}}, {{x}} and {{y}}"),
+                ));
             }
         }
         errs
@@ -422,120 +429,139 @@ pub fn validate(
     receivers: &[ReceiverConfig],
     inputs: &[InputConfig],
     outputs: &[OutputConfig],
-) -> Vec<String> {
+) -> Vec<Problem> {
     let mut errs = Vec::new();
     if !(service.stats_interval_s > 0.0 && service.stats_interval_s.is_finite()) {
-        errs.push(format!("[service] stats_interval_s = {} must be positive", service.stats_interval_s));
+        errs.push(Problem::new(
+            "[service]",
+            format!("stats_interval_s = {} must be positive", service.stats_interval_s),
+        ));
     }
     // Port 0 would listen on a port the kernel picks and nobody knows.
     if service.metrics_listen.is_some_and(|a| a.port() == 0) {
-        errs.push("[service] metrics_listen: port 0 is no port".into());
+        errs.push(Problem::new("[service]", "metrics_listen: port 0 is no port"));
     }
     if !(64..=65_000).contains(&service.max_datagram_bytes) {
-        errs.push(format!(
-            "[service] max_datagram_bytes = {} must be in 64..=65000",
-            service.max_datagram_bytes
+        errs.push(Problem::new(
+            "[service]",
+            format!("max_datagram_bytes = {} must be in 64..=65000", service.max_datagram_bytes),
         ));
     }
     if service.record_max_bytes < 4096 {
-        errs.push(format!("[service] record_max_bytes = {} must be at least 4096", service.record_max_bytes));
+        errs.push(Problem::new(
+            "[service]",
+            format!("record_max_bytes = {} must be at least 4096", service.record_max_bytes),
+        ));
     }
     if !(service.record_max_age_s >= 1.0 && service.record_max_age_s.is_finite()) {
-        errs.push(format!("[service] record_max_age_s = {} must be at least 1", service.record_max_age_s));
+        errs.push(Problem::new(
+            "[service]",
+            format!("record_max_age_s = {} must be at least 1", service.record_max_age_s),
+        ));
     }
     if service.queue_frames == 0 {
-        errs.push("[service] queue_frames must be positive".into());
+        errs.push(Problem::new("[service]", "queue_frames must be positive"));
     }
     if service.realtime_priority > 99 {
-        errs.push(format!("[service] realtime_priority = {} must be in 0..=99", service.realtime_priority));
+        errs.push(Problem::new(
+            "[service]",
+            format!("realtime_priority = {} must be in 0..=99", service.realtime_priority),
+        ));
     }
     if !(service.demo_speed > 0.0 && service.demo_speed.is_finite()) {
-        errs.push(format!("[service] demo_speed = {} must be positive", service.demo_speed));
+        errs.push(Problem::new("[service]", format!("demo_speed = {} must be positive", service.demo_speed)));
     }
     for (i, r) in receivers.iter().enumerate() {
         let at = format!("[[receiver]] {} ({})", i + 1, r.id);
         if r.id.is_empty() || r.id.contains(char::is_whitespace) {
-            errs.push(format!("{at}: id must be a non-empty word"));
+            errs.push(Problem::new(&at, "id must be a non-empty word"));
         }
         if receivers[..i].iter().any(|o| o.id == r.id) {
-            errs.push(format!("{at}: id used twice"));
+            errs.push(Problem::new(&at, "id used twice"));
         }
         if !(r.lat.abs() <= 90.0 && r.lon.abs() <= 180.0 && r.alt_m.is_finite()) {
-            errs.push(format!("{at}: position out of range"));
+            errs.push(Problem::new(&at, "position out of range"));
         }
         if let Some(s) = r.source {
             if receivers[..i].iter().any(|o| o.source == Some(s)) {
-                errs.push(format!("{at}: source {s} used twice"));
+                errs.push(Problem::new(&at, format!("source {s} used twice")));
             }
         }
         if let Some(b) = &r.beast_id {
             match BeastId::parse(b) {
-                None => errs.push(format!("{at}: beast_id = {b:?}: 16 hex digits or a UUID")),
+                None => errs.push(Problem::new(&at, format!("beast_id = {b:?}: 16 hex digits or a UUID"))),
                 Some(id) => {
                     if receivers[..i].iter().any(|o| o.beast_name() == Some(id)) {
-                        errs.push(format!("{at}: beast_id {b} used twice"));
+                        errs.push(Problem::new(&at, format!("beast_id {b} used twice")));
                     }
                 }
             }
         }
         if !(r.max_rate >= 0.0 && r.max_rate.is_finite()) {
-            errs.push(format!("{at}: max_rate must be zero or positive"));
+            errs.push(Problem::new(&at, "max_rate must be zero or positive"));
         }
         if let Some(Err(e)) = r.timing.map(|t| t.check()) {
-            errs.push(format!("{at}: timing: {e}"));
+            errs.push(Problem::new(&at, format!("timing: {e}")));
         }
     }
     let known = |id: &str| receivers.iter().any(|r| r.id == id);
     for (i, input) in inputs.iter().enumerate() {
         let at = format!("[[input]] {}", i + 1);
         match (&input.receiver, input.kind) {
-            (None, InputKind::BeastTcpClient) => errs.push(format!("{at}: beast_tcp_client needs receiver")),
-            (Some(id), _) if !known(id) => errs.push(format!("{at}: receiver {id:?} is not declared")),
+            (None, InputKind::BeastTcpClient) => {
+                errs.push(Problem::new(&at, "beast_tcp_client needs receiver"))
+            }
+            (Some(id), _) if !known(id) => {
+                errs.push(Problem::new(&at, format!("receiver {id:?} is not declared")))
+            }
             _ => {}
         }
         for id in &input.receivers {
             if !known(id) {
-                errs.push(format!("{at}: receivers: {id:?} is not declared"));
+                errs.push(Problem::new(&at, format!("receivers: {id:?} is not declared")));
             }
         }
         if input.address.port() == 0 {
-            errs.push(format!("{at}: address {}: port 0 is no port", input.address));
+            errs.push(Problem::new(&at, format!("address {}: port 0 is no port", input.address)));
         }
         if !(input.idle_timeout_s >= 0.0 && input.idle_timeout_s.is_finite()) {
-            errs.push(format!("{at}: idle_timeout_s = {} must be zero or positive", input.idle_timeout_s));
+            errs.push(Problem::new(
+                &at,
+                format!("idle_timeout_s = {} must be zero or positive", input.idle_timeout_s),
+            ));
         }
         if input.format == InputFormat::Hex {
-            errs.push(format!("{at}: format = hex: beast or avr"));
+            errs.push(Problem::new(&at, "format = hex: beast or avr"));
         }
         if input.format == InputFormat::Avr && input.kind != InputKind::Udp {
-            errs.push(format!("{at}: avr only over udp"));
+            errs.push(Problem::new(&at, "avr only over udp"));
         }
     }
     for (i, o) in outputs.iter().enumerate() {
         let at = format!("[[output]] {}", i + 1);
         if (o.kind == OutputKind::Udp || o.kind.is_tcp()) && o.address.is_none() {
-            errs.push(format!("{at}: {} needs address", o.kind.name()));
+            errs.push(Problem::new(&at, format!("{} needs address", o.kind.name())));
         }
         if o.format.is_stream() && !o.kind.is_tcp() {
-            errs.push(format!(
-                "{at}: format = {}: a byte stream, over tcp_server or tcp_connect",
-                o.format.name()
+            errs.push(Problem::new(
+                &at,
+                format!("format = {}: a byte stream, over tcp_server or tcp_connect", o.format.name()),
             ));
         }
         if o.format == OutputFormat::Asterix062 && o.kind != OutputKind::Udp {
-            errs.push(format!("{at}: asterix062 goes over udp"));
+            errs.push(Problem::new(&at, "asterix062 goes over udp"));
         }
         if o.forward_frames && o.format != OutputFormat::Beast {
-            errs.push(format!("{at}: forward_frames is for format = beast"));
+            errs.push(Problem::new(&at, "forward_frames is for format = beast"));
         }
         if !(1..=10_000).contains(&o.max_clients) {
-            errs.push(format!("{at}: max_clients = {} must be in 1..=10000", o.max_clients));
+            errs.push(Problem::new(&at, format!("max_clients = {} must be in 1..=10000", o.max_clients)));
         }
         if o.address.is_some_and(|a| a.port() == 0) {
-            errs.push(format!("{at}: address: port 0 is no port"));
+            errs.push(Problem::new(&at, "address: port 0 is no port"));
         }
         if o.kind == OutputKind::Stdout && o.format != OutputFormat::Json {
-            errs.push(format!("{at}: stdout prints json only"));
+            errs.push(Problem::new(&at, "stdout prints json only"));
         }
     }
     errs
@@ -551,6 +577,7 @@ mod tests {
         assert!(with("https://tiles.example/{z}/{x}/{y}.png").is_empty());
         let errs = with("https://tiles.example/{z}/{x}.png");
         assert_eq!(errs.len(), 1, "{errs:?}");
-        assert!(errs[0].contains("map_tiles") && errs[0].contains("{y}"), "{errs:?}");
+        assert_eq!(errs[0].table, "[http]");
+        assert!(errs[0].message.starts_with("map_tiles = ") && errs[0].message.contains("{y}"), "{errs:?}");
     }
 }
