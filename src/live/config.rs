@@ -422,7 +422,7 @@ fn one() -> u32 {
     1
 }
 
-/// Every problem of the live part, one per line.
+/// Every problem of the live part, each with its table.
 // Over 80 lines: a flat list of independent checks, one per field.
 pub fn validate(
     service: &ServiceConfig,
