@@ -169,38 +169,10 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
         })?;
     let mut core_cfg = cfg.core.clone();
     core_cfg.publish_source_tracks = cfg.publish_source_tracks;
-    let (mut front, mut back) = Core::stages(&core_cfg);
+    let (mut front, back) = Core::stages(&core_cfg);
     front.know(cfg.receiver.iter().map(|r| r.known()).collect());
     let (cmd_tx, cmd_rx) = std::sync::mpsc::sync_channel::<Batch>(8);
-    let writer = named_thread("core-back", move || -> (Back, Result<()>) {
-        let mut out = BufWriter::with_capacity(1 << 20, out_file);
-        let (mut events, mut line) = (Vec::new(), Vec::new());
-        let write = || -> Result<()> {
-            for batch in cmd_rx {
-                back.apply(batch.cmds, &mut events);
-                // The front's own events come in the order of their commands,
-                // already written out; the back's are written here between them.
-                let mut ends = batch.ends.iter();
-                let mut start = 0;
-                for ev in events.drain(..) {
-                    let written = if Batch::from_front(&ev) {
-                        let end = *ends.next().context("a front event without its text")?;
-                        let text = &batch.text[start..end];
-                        start = end;
-                        out.write_all(text)
-                    } else {
-                        line.clear();
-                        write_event(&mut line, &ev, |i| back.receiver_id(i));
-                        out.write_all(&line)
-                    };
-                    written.context("writing output")?;
-                }
-            }
-            out.flush().context("writing output")
-        };
-        let res = write();
-        (back, res)
-    })?;
+    let writer = named_thread("core-back", move || write_back(back, cmd_rx, out_file))?;
     let (mut first, mut last) = (f64::INFINITY, f64::NEG_INFINITY);
     let mut cmds = Vec::new();
     for batch in rx {
@@ -226,6 +198,68 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
     drop(cmd_tx);
     let (back, written) = writer.join().map_err(|_| anyhow::anyhow!("tracking thread panicked"))?;
     written?;
+    let diagnostics = diagnostics(&front, &back, last, &errors, skipped);
+    let s = front.stats();
+    Ok(Summary {
+        frames: s.frames,
+        messages: s.messages,
+        aircraft: front.decoder().stats().aircraft_created,
+        fixes: s.fixes,
+        tracks: back.fuser().stats().tracks_created,
+        positions: s.positions,
+        skipped_lines: skipped,
+        span_s: if last >= first { last - first } else { 0.0 },
+        elapsed_s: started.elapsed().as_secs_f64(),
+        diagnostics,
+    })
+}
+
+/// The back stage's thread of `run_capture`: each batch's commands applied,
+/// and the events written in order (the front's already as text, the
+/// back's written here between them). Returns the stage, for its counters.
+fn write_back(
+    mut back: Back,
+    batches: std::sync::mpsc::Receiver<Batch>,
+    out_file: File,
+) -> (Back, Result<()>) {
+    let mut out = BufWriter::with_capacity(1 << 20, out_file);
+    let (mut events, mut line) = (Vec::new(), Vec::new());
+    let write = || -> Result<()> {
+        for batch in batches {
+            back.apply(batch.cmds, &mut events);
+            // The front's own events come in the order of their commands,
+            // already written out; the back's are written here between them.
+            let mut ends = batch.ends.iter();
+            let mut start = 0;
+            for ev in events.drain(..) {
+                let written = if Batch::from_front(&ev) {
+                    let end = *ends.next().context("a front event without its text")?;
+                    let text = &batch.text[start..end];
+                    start = end;
+                    out.write_all(text)
+                } else {
+                    line.clear();
+                    write_event(&mut line, &ev, |i| back.receiver_id(i));
+                    out.write_all(&line)
+                };
+                written.context("writing output")?;
+            }
+        }
+        out.flush().context("writing output")
+    };
+    let res = write();
+    (back, res)
+}
+
+/// The run's reports for stderr: multilateration, its receivers, the
+/// network delays learnt, late copies, tracking, and the lines skipped.
+fn diagnostics(
+    front: &Front,
+    back: &Back,
+    last: f64,
+    errors: &[crate::feed::capture::LineError],
+    skipped: u64,
+) -> Vec<String> {
     let name = |k: usize| front.receiver_id(k).to_string();
     let mut diagnostics = vec![front.mlat().report(last, &name), front.mlat().receivers_line(last, &name)];
     diagnostics.extend(front.delay_report());
@@ -243,19 +277,7 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
     if skipped > errors.len() as u64 {
         diagnostics.push(format!("fuse1090: ... {skipped} malformed lines skipped in all"));
     }
-    let s = front.stats();
-    Ok(Summary {
-        frames: s.frames,
-        messages: s.messages,
-        aircraft: front.decoder().stats().aircraft_created,
-        fixes: s.fixes,
-        tracks: back.fuser().stats().tracks_created,
-        positions: s.positions,
-        skipped_lines: skipped,
-        span_s: if last >= first { last - first } else { 0.0 },
-        elapsed_s: started.elapsed().as_secs_f64(),
-        diagnostics,
-    })
+    diagnostics
 }
 
 /// Lowers the calling thread's priority (nice 10). The parser needs about
