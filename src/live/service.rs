@@ -113,7 +113,7 @@ pub async fn serve(
     cfg: Config,
     sink: Option<Sink>,
     shutdown: impl Future<Output = ()>,
-    mut reloads: mpsc::Receiver<Config>,
+    reloads: mpsc::Receiver<Config>,
 ) -> Result<()> {
     let ingest_only = matches!(sink, Some(Sink::Cluster(..)));
     let cfg = for_sink(cfg, ingest_only);
@@ -130,7 +130,7 @@ pub async fn serve(
         registry.add(r.clone());
         decls.push(r.known());
     }
-    let (mut streams, failed) = stream_out::start_all(&cfg.output, &[]).await;
+    let (streams, failed) = stream_out::start_all(&cfg.output, &[]).await;
     if let Some((n, e)) = failed.into_iter().next() {
         bail!("[[output]] {n} cannot start: {e}");
     }
@@ -149,7 +149,7 @@ pub async fn serve(
     let bound = inputs::bind_all(&cfg.input).await.map_err(anyhow::Error::msg)?;
     let core_thread = start_sink(sink, &core_cfg, setup, &tx, rx)?;
 
-    let mut running = RunningInputs::start(&cfg.input, bound, &tx, &registry);
+    let running = RunningInputs::start(&cfg.input, bound, &tx, &registry);
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
     tracing::info!(
         inputs = cfg.input.len(),
@@ -169,30 +169,11 @@ pub async fn serve(
         }));
     }
 
-    tokio::pin!(shutdown);
-    let mut current = cfg;
-    let mut reloading = true;
-    loop {
-        tokio::select! {
-            () = &mut shutdown => break,
-            new = reloads.recv(), if reloading => {
-                let Some(new) = new.map(|c| for_sink(c, ingest_only)) else {
-                    // No more reloads can come: the service runs on.
-                    reloading = false;
-                    continue;
-                };
-                let left_out = reload(&new, &current, &registry, &tx, &mut running, &mut streams).await;
-                current = new;
-                let status = match left_out {
-                    0 => "running; configuration re-read".to_string(),
-                    n => format!("running; configuration re-read, {n} input(s) could not bind (see the log)"),
-                };
-                let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready, sd_notify::NotifyState::Status(&status)]);
-            }
-        }
-    }
+    let mut live = Live { current: cfg, registry, tx, inputs: running, streams };
+    live.follow(shutdown, reloads, ingest_only).await;
     tracing::info!("stopping");
-    running.stop().await;
+    let Live { inputs, tx, .. } = live;
+    inputs.stop().await;
     stop_rest.stop();
     let late = shutdown::join_all(tasks, TASKS_STOP).await;
     if late > 0 {
@@ -301,57 +282,95 @@ pub(crate) async fn start_http(
     Ok((tasks, Some(data)))
 }
 
-/// Applies a re-read configuration (SIGHUP): receivers added, updated and
-/// revoked; outputs replaced; inputs, if changed, closed and bound anew.
-/// Returns how many new inputs could not bind (said in the log; the
-/// service goes on without them).
-async fn reload(
-    new: &Config,
-    current: &Config,
-    registry: &Arc<Registry>,
-    tx: &std::sync::mpsc::SyncSender<ToCore>,
-    running: &mut RunningInputs,
-    streams: &mut Vec<Arc<stream_out::Stream>>,
-) -> usize {
-    // New receivers added, known ones updated in place, removed ones
-    // revoked (their connections closed).
-    for r in registry.reconfigure(&new.receiver) {
-        let _ = tx.send(ToCore::AddReceiver(r.decl()));
-    }
-    // Logged once the receivers are in place (tests wait for it).
-    tracing::info!("SIGHUP: configuration re-read");
-    // Their ports are bound, and the map's settings served, once, at start.
-    if new.http != current.http || new.service.metrics_listen != current.service.metrics_listen {
-        tracing::warn!("SIGHUP: [http] and metrics_listen take effect at the next start");
-    }
-    let (started, failed) = stream_out::start_all(&new.output, streams).await;
-    for (n, e) in failed {
-        tracing::error!("SIGHUP: [[output]] {n} cannot start: {e}; going on without it");
-    }
-    *streams = started;
-    let _ = tx.send(ToCore::Outputs(Outputs::new(&new.output, &new.service, streams)));
-    if new.input == current.input {
-        return 0;
-    }
-    // Closed before the new ones bind the same ports.
-    std::mem::replace(running, RunningInputs::none()).stop().await;
-    // Each input that binds runs; one that cannot is said and left out,
-    // the daemon going on with the rest.
-    let (mut ok, mut bound) = (Vec::new(), Vec::new());
-    for (n, i) in new.input.iter().enumerate() {
-        match inputs::bind(i).await {
-            Ok(b) => {
-                ok.push(i.clone());
-                bound.push(b);
+/// What a reload changes: the configuration in force, the receivers'
+/// registry, the way to the core, the inputs and the output streams.
+struct Live {
+    current: Config,
+    registry: Arc<Registry>,
+    tx: SyncSender<ToCore>,
+    inputs: RunningInputs,
+    streams: Vec<Arc<stream_out::Stream>>,
+}
+
+impl Live {
+    /// Applies each configuration from `reloads` until `shutdown`.
+    async fn follow(
+        &mut self,
+        shutdown: impl Future<Output = ()>,
+        mut reloads: mpsc::Receiver<Config>,
+        ingest_only: bool,
+    ) {
+        tokio::pin!(shutdown);
+        let mut reloading = true;
+        loop {
+            tokio::select! {
+                () = &mut shutdown => return,
+                new = reloads.recv(), if reloading => {
+                    let Some(new) = new.map(|c| for_sink(c, ingest_only)) else {
+                        // No more reloads can come: the service runs on.
+                        reloading = false;
+                        continue;
+                    };
+                    let status = match self.reload(new).await {
+                        0 => "running; configuration re-read".to_string(),
+                        n => format!("running; configuration re-read, {n} input(s) could not bind (see the log)"),
+                    };
+                    let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready, sd_notify::NotifyState::Status(&status)]);
+                }
             }
-            Err(e) => tracing::error!(
-                "SIGHUP: input {} ({}) cannot bind {}: {e}; running without it",
-                n + 1,
-                i.kind.name(),
-                i.address
-            ),
         }
     }
-    *running = RunningInputs::start(&ok, bound, tx, registry);
-    new.input.len() - ok.len()
+
+    /// Applies a re-read configuration (SIGHUP): receivers added, updated and
+    /// revoked; outputs replaced; inputs, if changed, closed and bound anew.
+    /// Returns how many new inputs could not bind (said in the log; the
+    /// service goes on without them).
+    async fn reload(&mut self, new: Config) -> usize {
+        // New receivers added, known ones updated in place, removed ones
+        // revoked (their connections closed).
+        for r in self.registry.reconfigure(&new.receiver) {
+            let _ = self.tx.send(ToCore::AddReceiver(r.decl()));
+        }
+        // Logged once the receivers are in place (tests wait for it).
+        tracing::info!("SIGHUP: configuration re-read");
+        // Their ports are bound, and the map's settings served, once, at start.
+        let current = &self.current;
+        if new.http != current.http || new.service.metrics_listen != current.service.metrics_listen {
+            tracing::warn!("SIGHUP: [http] and metrics_listen take effect at the next start");
+        }
+        let (started, failed) = stream_out::start_all(&new.output, &self.streams).await;
+        for (n, e) in failed {
+            tracing::error!("SIGHUP: [[output]] {n} cannot start: {e}; going on without it");
+        }
+        self.streams = started;
+        let _ = self.tx.send(ToCore::Outputs(Outputs::new(&new.output, &new.service, &self.streams)));
+        let left_out = if new.input == current.input { 0 } else { self.replace_inputs(&new.input).await };
+        self.current = new;
+        left_out
+    }
+
+    /// The inputs closed, then `list` bound and started: each input that
+    /// binds runs; one that cannot is said and left out, the daemon going
+    /// on with the rest. Returns how many were left out.
+    async fn replace_inputs(&mut self, list: &[InputConfig]) -> usize {
+        // Closed before the new ones bind the same ports.
+        std::mem::replace(&mut self.inputs, RunningInputs::none()).stop().await;
+        let (mut ok, mut bound) = (Vec::new(), Vec::new());
+        for (n, i) in list.iter().enumerate() {
+            match inputs::bind(i).await {
+                Ok(b) => {
+                    ok.push(i.clone());
+                    bound.push(b);
+                }
+                Err(e) => tracing::error!(
+                    "SIGHUP: input {} ({}) cannot bind {}: {e}; running without it",
+                    n + 1,
+                    i.kind.name(),
+                    i.address
+                ),
+            }
+        }
+        self.inputs = RunningInputs::start(&ok, bound, &self.tx, &self.registry);
+        list.len() - ok.len()
+    }
 }
