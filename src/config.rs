@@ -4,7 +4,6 @@
 
 use std::path::Path;
 
-use anyhow::{Context, Result};
 use serde::Deserialize;
 
 use crate::core::CoreConfig;
@@ -28,19 +27,6 @@ pub struct Config {
     /// Several processes over NATS JetStream (docs/cluster.md); absent, one node.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub cluster: Option<crate::cluster::ClusterConfig>,
-}
-
-/// Reads a TOML file into `T`; errors name the file (and, from the parser,
-/// the line and column). Shared by configurations and scenarios.
-pub fn load_toml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<(T, String)> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let name = path.display().to_string();
-    Ok((parse_toml(&text, &name)?, name))
-}
-
-/// Parses TOML text into `T`, errors prefixed with `name`.
-pub fn parse_toml<T: serde::de::DeserializeOwned>(text: &str, name: &str) -> Result<T> {
-    toml::from_str(text).map_err(|e| anyhow::anyhow!("{name}: {e}"))
 }
 
 impl Config {

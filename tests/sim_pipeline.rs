@@ -292,7 +292,7 @@ hex = "4B0001"
 start = { lat = 47.2, lon = 8.1, alt_m = 10000.0, speed_mps = 200.0, heading_deg = 45.0 }
 segments = [{ duration_s = 300.0 }]
 "#;
-    let s: Scenario = fuse1090::config::parse_toml(text, "rough").unwrap();
+    let s = Scenario::parse(text, "rough").unwrap();
     let (cap, truth_bytes) = sim_bytes(&s);
     let truth_text = String::from_utf8(truth_bytes.clone()).unwrap();
     assert!(truth_text.lines().any(|l| l.contains("\"id\":\"rough\"")

@@ -29,7 +29,7 @@ fn segment(seed: u64, start: f64, duration_s: f64, count: usize, first_hex: u32)
          radius_km = 120.0\nalt_m = [1000.0, 12000.0]\nspeed_mps = [100.0, 250.0]\nmode_s_only = {}\n",
         count / 10
     );
-    fuse1090::config::parse_toml(&text, "soak segment").unwrap()
+    Scenario::parse(&text, "soak segment").unwrap()
 }
 
 /// This process's resident memory (kB).
