@@ -25,7 +25,7 @@ use crate::fuse::{
 };
 use crate::live::outputs::Outputs;
 use crate::live::registry::Registry;
-use crate::live::shutdown::{self, Stopper};
+use crate::live::shutdown::Tasks;
 use crate::live::stream_out;
 use crate::live::web::WebPublisher;
 use crate::publish::json::write_event;
@@ -137,12 +137,6 @@ pub struct PublisherStats {
 /// for the clock's last receiver records.
 const CLOCK_END_WAIT: std::time::Duration = std::time::Duration::from_secs(10);
 
-/// The HTTP server's tasks and what tells them to stop.
-struct HttpTasks {
-    stopper: Stopper,
-    tasks: Vec<tokio::task::JoinHandle<()>>,
-}
-
 /// Where the events go: the `--output` file, the configuration's
 /// `[[output]]` destinations and the HTTP server's documents, as a single
 /// node has them.
@@ -156,7 +150,7 @@ struct Sinks {
 }
 
 impl Sinks {
-    async fn start(config: &Config, output: Option<PathBuf>) -> Result<(Sinks, HttpTasks)> {
+    async fn start(config: &Config, output: Option<PathBuf>) -> Result<(Sinks, Tasks)> {
         let file: Box<dyn Write + Send> = match &output {
             Some(p) => Box::new(std::io::BufWriter::new(
                 std::fs::File::create(p).with_context(|| format!("cannot create {}", p.display()))?,
@@ -169,13 +163,10 @@ impl Sinks {
         }
         let outputs = Outputs::new(&config.output, &config.service, &streams);
         let registry = Arc::new(Registry::default());
-        let (stopper, shutdown) = Stopper::new();
-        let (tasks, web) = crate::live::start_http(config, &registry, &shutdown).await?;
+        let mut tasks = Tasks::default();
+        let web = crate::live::start_http(config, &registry, &mut tasks).await?;
         let web = web.map(WebPublisher::new);
-        Ok((
-            Sinks { file, outputs, web, registry, messages: 0, text: Vec::new() },
-            HttpTasks { stopper, tasks },
-        ))
+        Ok((Sinks { file, outputs, web, registry, messages: 0, text: Vec::new() }, tasks))
     }
 
     /// One batch of events, at data time `now`; receivers named by `ids`.
@@ -315,8 +306,7 @@ pub async fn run(
         }
     }
     sinks.file.flush().context("writing output")?;
-    http_tasks.stopper.stop();
-    shutdown::join_all(http_tasks.tasks, std::time::Duration::from_secs(2)).await;
+    http_tasks.stop(std::time::Duration::from_secs(2)).await;
     println!(
         "publisher: batches={} frames={} events={} conflicts={} replayed_batches={} bad_batches={} unknown_receivers={}",
         stats.batches,

@@ -14,13 +14,12 @@ use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
 use tokio::sync::mpsc;
-use tokio::task::JoinHandle;
 
 use super::config::InputConfig;
 use super::inputs::{self, Registry};
 use super::outputs::Outputs;
 use super::record::{self, Recorder};
-use super::shutdown::{self, Shutdown, Stopper};
+use super::shutdown::Tasks;
 use super::{http, replay, stages, stream_out, unix_now, web, Sink, ToCore};
 use crate::config::Config;
 use crate::core::front::KnownReceiver;
@@ -70,39 +69,26 @@ pub fn signals(path: PathBuf) -> Result<(impl Future<Output = ()>, mpsc::Receive
     Ok((shutdown, reloads))
 }
 
-/// The inputs running: their tasks and the stopper that ends them.
-struct RunningInputs {
-    stopper: Option<Stopper>,
-    tasks: Vec<JoinHandle<()>>,
+/// The inputs in `list`, each on its bound socket, as tasks that stop together.
+fn start_inputs(
+    list: &[InputConfig],
+    bound: Vec<inputs::Bound>,
+    tx: &SyncSender<ToCore>,
+    reg: &Arc<Registry>,
+) -> Tasks {
+    let mut tasks = Tasks::default();
+    for (i, b) in list.iter().zip(bound) {
+        let task = inputs::spawn(i.clone(), b, tx.clone(), reg.clone(), tasks.shutdown());
+        tasks.push(task);
+    }
+    tasks
 }
 
-impl RunningInputs {
-    fn start(
-        list: &[InputConfig],
-        bound: Vec<inputs::Bound>,
-        tx: &SyncSender<ToCore>,
-        reg: &Arc<Registry>,
-    ) -> Self {
-        let (stopper, shutdown) = Stopper::new();
-        let tasks = list
-            .iter()
-            .zip(bound)
-            .map(|(i, b)| inputs::spawn(i.clone(), b, tx.clone(), reg.clone(), &shutdown))
-            .collect();
-        RunningInputs { stopper: Some(stopper), tasks }
-    }
-
-    fn none() -> Self {
-        RunningInputs { stopper: None, tasks: Vec::new() }
-    }
-
-    /// Tells them to stop and waits until they have (their ports free).
-    async fn stop(self) {
-        drop(self.stopper);
-        let late = shutdown::join_all(self.tasks, TASKS_STOP).await;
-        if late > 0 {
-            tracing::warn!(inputs = late, "inputs still running after being told to stop");
-        }
+/// Tells the inputs to stop and waits until they have (their ports free).
+async fn stop_inputs(inputs: Tasks) {
+    let late = inputs.stop(TASKS_STOP).await;
+    if late > 0 {
+        tracing::warn!(inputs = late, "inputs still running after being told to stop");
     }
 }
 
@@ -119,8 +105,8 @@ pub async fn serve(
     let cfg = for_sink(cfg, ingest_only);
     let registry = Arc::new(Registry { queue_frames: cfg.service.queue_frames, ..Default::default() });
     // Everything but the inputs stops at the end (a reload replaces those).
-    let (stop_rest, rest) = Stopper::new();
-    let (mut tasks, web) = start_http(&cfg, &registry, &rest).await?;
+    let mut rest = Tasks::default();
+    let web = start_http(&cfg, &registry, &mut rest).await?;
     // Every message holds a frame or more: the frames' bound bites first.
     let (tx, rx) = sync_channel::<ToCore>(cfg.service.queue_frames);
     let mut core_cfg = cfg.core.clone();
@@ -149,7 +135,7 @@ pub async fn serve(
     let bound = inputs::bind_all(&cfg.input).await.map_err(anyhow::Error::msg)?;
     let core_thread = start_sink(sink, &core_cfg, setup, &tx, rx)?;
 
-    let running = RunningInputs::start(&cfg.input, bound, &tx, &registry);
+    let running = start_inputs(&cfg.input, bound, &tx, &registry);
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
     tracing::info!(
         inputs = cfg.input.len(),
@@ -161,21 +147,20 @@ pub async fn serve(
     // not end the demo's replay.
     if let Some(capture) = cfg.service.demo_capture.clone() {
         let (speed, demo_cfg) = (cfg.service.demo_speed, cfg.clone());
-        tasks.push(rest.spawn(async move {
+        rest.spawn(async move {
             match replay::replay(&capture, &demo_cfg, speed).await {
                 Ok(n) => tracing::info!(frames = n, "demo replay finished"),
                 Err(e) => tracing::error!("demo replay: {e:#}"),
             }
-        }));
+        });
     }
 
     let mut live = Live { current: cfg, registry, tx, inputs: running, streams };
     live.follow(shutdown, reloads, ingest_only).await;
     tracing::info!("stopping");
     let Live { inputs, tx, .. } = live;
-    inputs.stop().await;
-    stop_rest.stop();
-    let late = shutdown::join_all(tasks, TASKS_STOP).await;
+    stop_inputs(inputs).await;
+    let late = rest.stop(TASKS_STOP).await;
     if late > 0 {
         tracing::warn!(tasks = late, "tasks still running at the stop");
     }
@@ -246,12 +231,11 @@ fn for_sink(cfg: Config, ingest_only: bool) -> Config {
 pub(crate) async fn start_http(
     cfg: &Config,
     registry: &Arc<Registry>,
-    shutdown: &Shutdown,
-) -> Result<(Vec<JoinHandle<()>>, Option<Arc<web::WebData>>)> {
+    tasks: &mut Tasks,
+) -> Result<Option<Arc<web::WebData>>> {
     let (metrics_at, http_at) = (cfg.service.metrics_listen, cfg.http.listen);
-    let mut tasks = Vec::new();
     if metrics_at.is_none() && http_at.is_none() {
-        return Ok((tasks, None));
+        return Ok(None);
     }
     let handle = metrics_exporter_prometheus::PrometheusBuilder::new()
         .install_recorder()
@@ -262,24 +246,19 @@ pub(crate) async fn start_http(
             .with_context(|| format!("the Prometheus endpoint cannot bind {addr}"))?;
         let routes = http::Routes { metrics: Some(handle.clone()), web: None };
         let counters = registry.metrics_http.clone();
-        tasks.push(shutdown.spawn(http::serve(listener, routes, counters, http::METRICS_CONNECTIONS)));
+        tasks.spawn(http::serve(listener, routes, counters, http::METRICS_CONNECTIONS));
         tracing::info!(address = %addr, "Prometheus metrics");
     }
-    let Some(addr) = http_at else { return Ok((tasks, None)) };
+    let Some(addr) = http_at else { return Ok(None) };
     let listener = tokio::net::TcpListener::bind(addr)
         .await
         .with_context(|| format!("the HTTP server ([http] listen) cannot bind {addr}"))?;
     let data =
         Arc::new(web::WebData::new(cfg.http.map_tiles.as_deref(), cfg.http.map_attribution.as_deref()));
     let routes = http::Routes { metrics: Some(handle), web: Some(data.clone()) };
-    tasks.push(shutdown.spawn(http::serve(
-        listener,
-        routes,
-        registry.http.clone(),
-        cfg.http.max_connections,
-    )));
+    tasks.spawn(http::serve(listener, routes, registry.http.clone(), cfg.http.max_connections));
     tracing::info!(address = %addr, "HTTP: the map at /, /data/aircraft.json, /data/receivers.json, /metrics");
-    Ok((tasks, Some(data)))
+    Ok(Some(data))
 }
 
 /// What a reload changes: the configuration in force, the receivers'
@@ -288,7 +267,7 @@ struct Live {
     current: Config,
     registry: Arc<Registry>,
     tx: SyncSender<ToCore>,
-    inputs: RunningInputs,
+    inputs: Tasks,
     streams: Vec<Arc<stream_out::Stream>>,
 }
 
@@ -354,7 +333,7 @@ impl Live {
     /// on with the rest. Returns how many were left out.
     async fn replace_inputs(&mut self, list: &[InputConfig]) -> usize {
         // Closed before the new ones bind the same ports.
-        std::mem::replace(&mut self.inputs, RunningInputs::none()).stop().await;
+        stop_inputs(std::mem::take(&mut self.inputs)).await;
         let (mut ok, mut bound) = (Vec::new(), Vec::new());
         for (n, i) in list.iter().enumerate() {
             match inputs::bind(i).await {
@@ -370,7 +349,7 @@ impl Live {
                 ),
             }
         }
-        self.inputs = RunningInputs::start(&ok, bound, &self.tx, &self.registry);
+        self.inputs = start_inputs(&ok, bound, &self.tx, &self.registry);
         list.len() - ok.len()
     }
 }

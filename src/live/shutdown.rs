@@ -52,9 +52,48 @@ impl Shutdown {
     }
 }
 
+/// Tasks that stop together: the stopper that tells them and their handles.
+pub struct Tasks {
+    stopper: Stopper,
+    shutdown: Shutdown,
+    handles: Vec<JoinHandle<()>>,
+}
+
+impl Default for Tasks {
+    fn default() -> Self {
+        let (stopper, shutdown) = Stopper::new();
+        Tasks { stopper, shutdown, handles: Vec::new() }
+    }
+}
+
+impl Tasks {
+    /// What tells them to stop, for a task started elsewhere.
+    pub fn shutdown(&self) -> &Shutdown {
+        &self.shutdown
+    }
+
+    /// A task started with [`Tasks::shutdown`], to be waited for.
+    pub fn push(&mut self, task: JoinHandle<()>) {
+        self.handles.push(task);
+    }
+
+    /// Runs `task` among them (see [`Shutdown::spawn`]).
+    pub fn spawn(&mut self, task: impl Future<Output = ()> + Send + 'static) {
+        let handle = self.shutdown.spawn(task);
+        self.handles.push(handle);
+    }
+
+    /// Tells them to stop and waits, at most `limit`, until they have.
+    /// Returns how many had not ended by then.
+    pub async fn stop(self, limit: std::time::Duration) -> usize {
+        drop(self.stopper);
+        join_all(self.handles, limit).await
+    }
+}
+
 /// Waits, at most `limit`, for `tasks` to end (told to by their stopper).
 /// Returns how many had not ended by then.
-pub async fn join_all(tasks: Vec<JoinHandle<()>>, limit: std::time::Duration) -> usize {
+async fn join_all(tasks: Vec<JoinHandle<()>>, limit: std::time::Duration) -> usize {
     let deadline = tokio::time::Instant::now() + limit;
     let mut late = 0;
     for t in tasks {
