@@ -123,6 +123,9 @@ struct Acc {
     nees: Vec<(f64, f64)>,
     /// Horizontal Cramér-Rao variances (trace, m^2) of MLAT fixes.
     crb: Vec<f64>,
+    /// NEES summed per aircraft and minute, with the count: the batches of
+    /// `nees_batch_band`.
+    batches: Vec<(f64, usize)>,
 }
 
 /// One source's aircraft pooled for its overall row: their errors, how many,
@@ -176,6 +179,12 @@ pub struct Row {
     pub v_rmse_m: Option<f64>,
     pub nees: Option<f64>,
     pub nees_band: Option<[f64; 2]>,
+    /// The same band from the spread of the NEES's sums per aircraft and
+    /// minute (batch means, [`montecarlo::runs_band`] with the minutes as
+    /// runs): honest where estimates share their errors (fixes from one
+    /// clock synchronisation, a track's successive states), which the band
+    /// above, of independent values, is not. `None` below 20 batches.
+    pub nees_batch_band: Option<[f64; 2]>,
     /// Every NEES value with its time, for the Monte Carlo runner's
     /// per-epoch test (samples of one run are correlated in time).
     #[serde(skip)]
@@ -273,6 +282,17 @@ fn p95(v: &[f64]) -> f64 {
     let mut s = v.to_vec();
     s.sort_by(f64::total_cmp);
     s[((s.len() as f64 * 0.95).ceil() as usize).clamp(1, s.len()) - 1]
+}
+
+/// NEES values (time, value) summed per minute, with their counts.
+fn minute_batches(nees: &[(f64, f64)]) -> Vec<(f64, usize)> {
+    let mut by_minute: BTreeMap<i64, (f64, usize)> = BTreeMap::new();
+    for &(t, x) in nees {
+        let b = by_minute.entry((t / 60.0).floor() as i64).or_default();
+        b.0 += x;
+        b.1 += 1;
+    }
+    by_minute.into_values().collect()
 }
 
 /// 95% band of the mean of `n` chi-square(2) NEES values.
@@ -412,6 +432,9 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
         nees: (!acc.nees.is_empty())
             .then(|| acc.nees.iter().map(|(_, x)| x).sum::<f64>() / acc.nees.len() as f64),
         nees_band: (!acc.nees.is_empty()).then(|| nees_band(acc.nees.len(), 2.0)),
+        nees_batch_band: (acc.batches.len() >= 20)
+            .then(|| montecarlo::runs_band(&acc.batches, 2.0))
+            .flatten(),
         nees_samples: acc.nees.clone(),
         continuity: cont,
         continuity_1km: cont_1km,
@@ -426,6 +449,7 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
     let mut aircraft_rows = Vec::new();
     let mut overall: BTreeMap<String, Pooled> = BTreeMap::new();
     for ((source, hex), (mut acc, false_tracks)) in per {
+        acc.batches = minute_batches(&acc.nees);
         let span = truth.span(&hex).unwrap_or((0.0, 0.0));
         let mut near: Vec<f64> =
             acc.times.iter().zip(&acc.h_err).filter(|&(_, &e)| e <= 1000.0).map(|(&t, _)| t).collect();
@@ -442,6 +466,7 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
             o.acc.v_err.extend(&acc.v_err);
             o.acc.nees.extend(&acc.nees);
             o.acc.crb.extend(&acc.crb);
+            o.acc.batches.extend(&acc.batches);
             o.aircraft += 1;
             o.cont += cont;
             o.cont_1km += cont_1km;
@@ -475,7 +500,7 @@ fn fmt_opt(v: Option<f64>, prec: usize) -> String {
 impl std::fmt::Display for Report {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let header = format!(
-            "{:<18} {:>6} {:>8} {:>9} {:>8} {:>8} {:>7} {:>15} {:>6} {:>6} {:>6} {:>5} {:>15}",
+            "{:<18} {:>6} {:>8} {:>9} {:>8} {:>8} {:>7} {:>15} {:>15} {:>6} {:>6} {:>6} {:>5} {:>15}",
             "source",
             "hex",
             "n",
@@ -484,6 +509,7 @@ impl std::fmt::Display for Report {
             "v_rmse_m",
             "nees",
             "nees_95%",
+            "batch_95%",
             "cont",
             "cont1k",
             "breaks",
@@ -492,7 +518,7 @@ impl std::fmt::Display for Report {
         );
         let line = |r: &Row| {
             format!(
-                "{:<18} {:>6} {:>8} {:>9.2} {:>8.2} {:>8} {:>7} {:>15} {:>6.3} {:>6.3} {:>6} {:>5} {:>15}",
+                "{:<18} {:>6} {:>8} {:>9.2} {:>8.2} {:>8} {:>7} {:>15} {:>15} {:>6.3} {:>6.3} {:>6} {:>5} {:>15}",
                 r.source,
                 if r.hex == "all" { format!("{} ac", r.aircraft) } else { r.hex.clone() },
                 r.n,
@@ -501,6 +527,7 @@ impl std::fmt::Display for Report {
                 fmt_opt(r.v_rmse_m, 2),
                 fmt_opt(r.nees, 2),
                 r.nees_band.map_or("-".into(), |b| format!("[{:.2}, {:.2}]", b[0], b[1])),
+                r.nees_batch_band.map_or("-".into(), |b| format!("[{:.2}, {:.2}]", b[0], b[1])),
                 r.continuity,
                 r.continuity_1km,
                 r.breaks,
