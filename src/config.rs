@@ -47,7 +47,7 @@ impl Config {
     fn validated(self, file: &str) -> Result<Config, ConfigError> {
         let mut problems: Vec<Problem> = Vec::new();
         if let Err(e) = self.core.validate() {
-            problems.extend(e.lines().map(Problem::of_core));
+            problems.extend(e);
         }
         problems.extend(crate::live::config::validate(
             &self.service,
@@ -57,7 +57,7 @@ impl Config {
         ));
         problems.extend(self.http.validate());
         if let Some(c) = &self.cluster {
-            problems.extend(c.validate().into_iter().map(|e| Problem::new("[cluster]", e)));
+            problems.extend(c.validate());
         }
         if problems.is_empty() {
             Ok(self)
@@ -80,40 +80,7 @@ pub enum ConfigError {
     Invalid { file: String, problems: Vec<Problem> },
 }
 
-/// One value refused: the table it is in and what is wrong with it.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Problem {
-    /// `[service]`, `[core.track]`, `[[input]] 2`, `[[receiver]] 1 (rx1)`.
-    pub table: String,
-    /// What is wrong, naming the field (`stats_interval_s = -1 must be
-    /// positive`).
-    pub message: String,
-}
-
-impl Problem {
-    pub fn new(table: &str, message: impl Into<String>) -> Problem {
-        Problem { table: table.to_string(), message: message.into() }
-    }
-
-    /// A line of the core's validation: its own fields are `[core]`'s, a
-    /// sub-table's line names it (`[core.track] models[0]: ...`).
-    fn of_core(line: &str) -> Problem {
-        match line.strip_prefix('[').and_then(|l| l.split_once("] ")) {
-            Some((table, message)) if table.starts_with("core.") => {
-                Problem::new(&format!("[{table}]"), message)
-            }
-            _ => Problem::new("[core]", line),
-        }
-    }
-}
-
-impl std::fmt::Display for Problem {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        // An array's entry is named by its number: a colon sets it apart.
-        let sep = if self.table.starts_with("[[") { ": " } else { " " };
-        write!(f, "{}{sep}{}", self.table, self.message)
-    }
-}
+pub use crate::problem::Problem;
 
 impl std::fmt::Display for ConfigError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -208,6 +175,13 @@ mod tests {
         let text = r#"
 [core]
 group_wait_s = 9
+max_range_km = -1
+[core.mlat]
+jitter_gps_ns = 0
+[core.track.sparse]
+particles = 5
+[core.fuse.conflict]
+interval_s = 0
 [service]
 realtime_priority = 100
 [[receiver]]
@@ -234,6 +208,10 @@ format = "json"
         let e = Config::parse(text, "bad.toml").unwrap_err().to_string();
         for needle in [
             "bad.toml: [core] group_wait_s",
+            "bad.toml: [core] max_range_km = -1 must be positive",
+            "bad.toml: [core.mlat] jitter_gps_ns = 0 must be positive",
+            "bad.toml: [core.track.sparse] particles = 5 must be 100 to 100000",
+            "bad.toml: [core.fuse.conflict] interval_s = 0 must be positive",
             "[service] realtime_priority = 100 must be in 0..=99",
             "[[receiver]] 1 (a): position out of range",
             "[[receiver]] 1 (a): beast_id = \"12345\": 16 hex digits or a UUID",

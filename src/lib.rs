@@ -19,5 +19,5 @@ pub mod cmd;
 pub mod config;
 pub mod live;
 
-pub use fuse1090_core::{core, feed, fuse, geo, mlat, modes, publish, track, FastMap};
+pub use fuse1090_core::{core, feed, fuse, geo, mlat, modes, problem, publish, track, FastMap};
 pub use fuse1090_sim::{eval, sim};

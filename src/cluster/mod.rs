@@ -46,6 +46,7 @@ use async_nats::jetstream::{self, kv, stream};
 use serde::{Deserialize, Serialize};
 
 use crate::config::Config;
+use crate::problem::Problem;
 
 /// What a process does in the cluster.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -106,33 +107,35 @@ impl Default for ClusterConfig {
 }
 
 impl ClusterConfig {
-    pub fn validate(&self) -> Vec<String> {
+    /// Every problem of `[cluster]`.
+    pub fn validate(&self) -> Vec<Problem> {
+        let at = |message: String| Problem::at("cluster", message);
         let mut errs = Vec::new();
         if !(1..=4096).contains(&self.partitions) {
-            errs.push(format!("partitions = {} must be in 1..=4096", self.partitions));
+            errs.push(at(format!("partitions = {} must be in 1..=4096", self.partitions)));
         }
         if self.roles.is_empty() {
-            errs.push("roles must name at least one of ingest, worker, clock, publisher".into());
+            errs.push(at("roles must name at least one of ingest, worker, clock, publisher".into()));
         }
         if !(self.batch_s > 0.0 && self.batch_s <= 1.0) {
-            errs.push(format!("batch_s = {} must be in (0, 1]", self.batch_s));
+            errs.push(at(format!("batch_s = {} must be in (0, 1]", self.batch_s)));
         }
         if !(self.clock_lag_s >= 2.0 * self.batch_s && self.clock_lag_s <= 10.0) {
-            errs.push(format!("clock_lag_s = {} must be in [2 batch_s, 10]", self.clock_lag_s));
+            errs.push(at(format!("clock_lag_s = {} must be in [2 batch_s, 10]", self.clock_lag_s)));
         }
         if !(self.lease_s >= 1.0 && self.lease_s <= 60.0) {
-            errs.push(format!("lease_s = {} must be in [1, 60]", self.lease_s));
+            errs.push(at(format!("lease_s = {} must be in [1, 60]", self.lease_s)));
         }
         if !(self.checkpoint_s > 0.0 && self.checkpoint_s.is_finite()) {
-            errs.push(format!("checkpoint_s = {} must be positive", self.checkpoint_s));
+            errs.push(at(format!("checkpoint_s = {} must be positive", self.checkpoint_s)));
         }
         if self.max_stream_bytes < 1 << 20 {
-            errs.push(format!("max_stream_bytes = {} must be at least 1 MiB", self.max_stream_bytes));
+            errs.push(at(format!("max_stream_bytes = {} must be at least 1 MiB", self.max_stream_bytes)));
         }
         if !self.name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
             || self.name.is_empty()
         {
-            errs.push(format!("name = {:?} may hold letters, digits, '-' and '_' only", self.name));
+            errs.push(at(format!("name = {:?} may hold letters, digits, '-' and '_' only", self.name)));
         }
         errs
     }

@@ -2,7 +2,7 @@
 //! outputs and operations. Checked as a whole: every problem is reported at
 //! once, each with the table it is in (`[[input]] 2: ...`).
 
-use crate::config::Problem;
+use crate::problem::{positive, Problem};
 use std::net::{IpAddr, SocketAddr};
 use std::path::PathBuf;
 
@@ -431,12 +431,11 @@ pub fn validate(
     outputs: &[OutputConfig],
 ) -> Vec<Problem> {
     let mut errs = Vec::new();
-    if !(service.stats_interval_s > 0.0 && service.stats_interval_s.is_finite()) {
-        errs.push(Problem::new(
-            "[service]",
-            format!("stats_interval_s = {} must be positive", service.stats_interval_s),
-        ));
-    }
+    positive(
+        "service",
+        &[("stats_interval_s", service.stats_interval_s), ("demo_speed", service.demo_speed)],
+        &mut errs,
+    );
     // Port 0 would listen on a port the kernel picks and nobody knows.
     if service.metrics_listen.is_some_and(|a| a.port() == 0) {
         errs.push(Problem::new("[service]", "metrics_listen: port 0 is no port"));
@@ -467,9 +466,6 @@ pub fn validate(
             "[service]",
             format!("realtime_priority = {} must be in 0..=99", service.realtime_priority),
         ));
-    }
-    if !(service.demo_speed > 0.0 && service.demo_speed.is_finite()) {
-        errs.push(Problem::new("[service]", format!("demo_speed = {} must be positive", service.demo_speed)));
     }
     for (i, r) in receivers.iter().enumerate() {
         let at = format!("[[receiver]] {} ({})", i + 1, r.id);

@@ -43,6 +43,7 @@ pub mod fuse;
 pub mod geo;
 pub mod mlat;
 pub mod modes;
+pub mod problem;
 pub mod publish;
 pub mod track;
 

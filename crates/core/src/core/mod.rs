@@ -35,6 +35,7 @@ use crate::fuse::{Alert, FuseConfig, Fuser, Output, TrackReport};
 use crate::mlat::group::Grouper;
 use crate::mlat::{Mlat, MlatConfig, MlatFix};
 use crate::modes::Decoder;
+use crate::problem::{positive, Problem};
 use crate::track::TrackConfig;
 
 #[derive(Clone, Debug, Deserialize, serde::Serialize)]
@@ -72,24 +73,32 @@ impl Default for CoreConfig {
 }
 
 impl CoreConfig {
-    pub fn validate(&self) -> Result<(), String> {
+    /// Every problem of `[core]` and its sub-tables at once, each naming
+    /// its table.
+    pub fn validate(&self) -> Result<(), Vec<Problem>> {
+        let mut out = Vec::new();
         if !(self.group_wait_s > 0.0 && self.group_wait_s <= 5.0) {
-            return Err(format!("group_wait_s = {} must be in (0, 5]", self.group_wait_s));
+            out.push(Problem::at("core", format!("group_wait_s = {} must be in (0, 5]", self.group_wait_s)));
         }
         // A pending group is about 400 bytes: ten million is 4 GB, and the
         // grouper's index numbers pending groups in 32 bits.
         if !(1..=10_000_000).contains(&self.max_pending_groups) {
-            return Err(format!("max_pending_groups = {} must be in 1..=10000000", self.max_pending_groups));
+            let message = format!("max_pending_groups = {} must be in 1..=10000000", self.max_pending_groups);
+            out.push(Problem::at("core", message));
         }
-        if !self.max_range_km.is_finite() || self.max_range_km <= 0.0 {
-            return Err(format!("max_range_km = {} must be positive", self.max_range_km));
+        positive(
+            "core",
+            &[("max_range_km", self.max_range_km), ("aircraft_ttl_s", self.aircraft_ttl_s)],
+            &mut out,
+        );
+        self.mlat.validate("core.mlat", &mut out);
+        self.track.validate("core.track", &mut out);
+        self.fuse.validate("core.fuse", &mut out);
+        if out.is_empty() {
+            Ok(())
+        } else {
+            Err(out)
         }
-        if !self.aircraft_ttl_s.is_finite() || self.aircraft_ttl_s <= 0.0 {
-            return Err(format!("aircraft_ttl_s = {} must be positive", self.aircraft_ttl_s));
-        }
-        self.track.validate().map_err(|e| format!("[core.track] {e}"))?;
-        self.fuse.validate().map_err(|e| format!("[core.fuse] {e}"))?;
-        Ok(())
     }
 }
 

@@ -3,6 +3,7 @@
 use serde::Deserialize;
 
 use super::{ConflictConfig, ConformanceConfig, Method};
+use crate::problem::{not_negative, Problem};
 
 #[derive(Clone, Debug, Deserialize, serde::Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
@@ -35,27 +36,19 @@ impl Default for FuseConfig {
 }
 
 impl FuseConfig {
-    pub fn validate(&self) -> Result<(), String> {
-        let mut errs = Vec::new();
-        for (name, v) in [
-            ("mlat_hold_s", self.mlat_hold_s),
-            ("sources_window_s", self.sources_window_s),
-            ("max_time_error_s", self.max_time_error_s),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                errs.push(format!("{name} = {v} must be zero or positive"));
-            }
-        }
-        if let Err(e) = self.conformance.validate() {
-            errs.push(format!("[conformance] {e}"));
-        }
-        if let Err(e) = self.conflict.validate() {
-            errs.push(format!("[conflict] {e}"));
-        }
-        if errs.is_empty() {
-            Ok(())
-        } else {
-            Err(errs.join("\n"))
-        }
+    /// Every problem of the table at `path` (`core.fuse`) and its
+    /// sub-tables, into `out`.
+    pub fn validate(&self, path: &str, out: &mut Vec<Problem>) {
+        not_negative(
+            path,
+            &[
+                ("mlat_hold_s", self.mlat_hold_s),
+                ("sources_window_s", self.sources_window_s),
+                ("max_time_error_s", self.max_time_error_s),
+            ],
+            out,
+        );
+        self.conformance.validate(&format!("{path}.conformance"), out);
+        self.conflict.validate(&format!("{path}.conflict"), out);
     }
 }

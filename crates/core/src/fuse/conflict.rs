@@ -20,6 +20,7 @@ use crate::FastMap;
 use serde::{Deserialize, Serialize};
 
 use crate::geo::FT_TO_M;
+use crate::problem::{not_negative, positive, Problem};
 
 pub const NM: f64 = 1852.0;
 
@@ -44,17 +45,10 @@ impl Default for ConflictConfig {
 }
 
 impl ConflictConfig {
-    pub fn validate(&self) -> Result<(), String> {
-        if !(self.max_miss_nm > 0.0 && self.max_miss_nm.is_finite()) {
-            return Err(format!("max_miss_nm = {} must be positive", self.max_miss_nm));
-        }
-        if !(self.interval_s > 0.0 && self.interval_s.is_finite()) {
-            return Err(format!("interval_s = {} must be positive", self.interval_s));
-        }
-        if !(self.clear_after_s >= 0.0 && self.clear_after_s.is_finite()) {
-            return Err(format!("clear_after_s = {} must be zero or positive", self.clear_after_s));
-        }
-        Ok(())
+    /// Every problem of the table at `path` (`core.fuse.conflict`), into `out`.
+    pub fn validate(&self, path: &str, out: &mut Vec<Problem>) {
+        positive(path, &[("max_miss_nm", self.max_miss_nm), ("interval_s", self.interval_s)], out);
+        not_negative(path, &[("clear_after_s", self.clear_after_s)], out);
     }
 }
 

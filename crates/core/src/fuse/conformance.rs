@@ -13,6 +13,7 @@
 //! degree of freedom above 3) or have no redundancy are not used. The flag clears once the sum (capped
 //! at twice the threshold) is back at zero and the last few fixes conform.
 
+use crate::problem::{positive, Problem};
 use serde::{Deserialize, Serialize};
 
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -33,17 +34,18 @@ impl Default for ConformanceConfig {
 }
 
 impl ConformanceConfig {
-    pub fn validate(&self) -> Result<(), String> {
+    /// Every problem of the table at `path` (`core.fuse.conformance`), into `out`.
+    pub fn validate(&self, path: &str, out: &mut Vec<Problem>) {
         if !(self.reference > 2.0 && self.reference.is_finite()) {
-            return Err(format!("reference = {} must exceed 2 (the chi-square mean)", self.reference));
+            out.push(Problem::at(
+                path,
+                format!("reference = {} must exceed 2 (the chi-square mean)", self.reference),
+            ));
         }
-        if !(self.threshold > 0.0 && self.threshold.is_finite()) {
-            return Err(format!("threshold = {} must be positive", self.threshold));
-        }
+        positive(path, &[("threshold", self.threshold)], out);
         if self.clear_after == 0 {
-            return Err("clear_after must be at least 1".into());
+            out.push(Problem::at(path, "clear_after must be at least 1"));
         }
-        Ok(())
     }
 }
 

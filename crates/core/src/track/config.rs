@@ -9,6 +9,7 @@ use serde::Deserialize;
 
 use super::imm::ImmSpec;
 use super::models::MotionModel;
+use crate::problem::{not_negative, positive, Problem};
 
 /// One model of the IMM set, as written in the configuration.
 #[derive(Clone, Copy, Debug, Deserialize, serde::Serialize, PartialEq)]
@@ -219,97 +220,88 @@ impl Default for TrackConfig {
 }
 
 impl TrackConfig {
-    /// Every problem at once, one per line.
-    // Over 80 lines: a flat list of independent checks, one per field.
-    pub fn validate(&self) -> Result<(), String> {
-        let mut errs = Vec::new();
+    /// Every problem of the table at `path` (`core.track`), into `out`.
+    pub fn validate(&self, path: &str, out: &mut Vec<Problem>) {
+        let mut bad = |message: String| out.push(Problem::at(path, message));
         if self.models.is_empty() {
-            errs.push("models: at least one model".to_string());
+            bad("models: at least one model".to_string());
         }
         for (i, m) in self.models.iter().enumerate() {
             if let Err(e) = m.check() {
-                errs.push(format!("models[{i}]: {e}"));
+                bad(format!("models[{i}]: {e}"));
             }
         }
         if let Some(t) = &self.transition {
             let n = self.models.len();
             if t.len() != n || t.iter().any(|r| r.len() != n) {
-                errs.push(format!("transition must be {n}x{n}, one row and column per model"));
+                bad(format!("transition must be {n}x{n}, one row and column per model"));
             } else if t.iter().any(|r| {
                 r.iter().any(|p| !(0.0..=1.0).contains(p)) || (r.iter().sum::<f64>() - 1.0).abs() > 1e-6
             }) {
-                errs.push("transition rows must be probabilities summing to 1".into());
+                bad("transition rows must be probabilities summing to 1".into());
             }
         } else if !(self.stay > 0.0 && self.stay <= 1.0) {
-            errs.push(format!("stay = {} must be in (0, 1]", self.stay));
+            bad(format!("stay = {} must be in (0, 1]", self.stay));
         }
         let m = &self.mlat_only;
         if m.enabled && super::Imm::home(self.models.len(), m.stay_first, m.to_first).is_none() {
-            errs.push(format!(
+            bad(format!(
                 "mlat_only: stay_first = {} and to_first = {} must be probabilities that leave the \
                  other models a chance to stay",
                 m.stay_first, m.to_first
             ));
         }
-        if let Err(e) = self.sparse.validate() {
-            errs.extend(e.lines().map(|l| format!("sparse: {l}")));
-        }
-        let pos = |v: f64| v.is_finite() && v > 0.0;
-        for (name, v) in [
-            ("vertical_q", self.vertical_q),
-            ("period_default_s", self.period_default_s),
-            ("reorder_window_s", self.reorder_window_s),
-            ("coast_after_s", self.coast_after_s),
-            ("drop_after_s", self.drop_after_s),
-            ("motion_interval_s", self.motion_interval_s),
-            ("vb_prior", self.vb_prior),
-            ("vb_prior_adsb", self.vb_prior_adsb),
-        ] {
-            if !pos(v) {
-                errs.push(format!("{name} = {v} must be positive"));
-            }
-        }
-        if let Some(p) = self.period_by_nacp.iter().find(|p| !pos(**p) || **p > 60.0) {
-            errs.push(format!("period_by_nacp: {p} must be in (0, 60]"));
-        }
-        for (name, v) in [
-            ("adsb_time_sigma_gps_s", self.adsb_time_sigma_gps_s),
-            ("adsb_time_sigma_arrival_s", self.adsb_time_sigma_arrival_s),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                errs.push(format!("{name} = {v} must be zero or positive"));
-            }
+        if let Some(p) = self.period_by_nacp.iter().find(|p| !(p.is_finite() && **p > 0.0 && **p <= 60.0)) {
+            bad(format!("period_by_nacp: {p} must be in (0, 60]"));
         }
         if !(self.mlat_sync_inflation.is_finite() && self.mlat_sync_inflation >= 1.0) {
-            errs.push(format!("mlat_sync_inflation = {} must be at least 1", self.mlat_sync_inflation));
+            bad(format!("mlat_sync_inflation = {} must be at least 1", self.mlat_sync_inflation));
         }
         for (name, v) in
             [("vb_forgetting", self.vb_forgetting), ("vb_forgetting_adsb", self.vb_forgetting_adsb)]
         {
             if !(v > 0.0 && v <= 1.0) {
-                errs.push(format!("{name} = {v} must be in (0, 1]"));
+                bad(format!("{name} = {v} must be in (0, 1]"));
             }
         }
         if !(self.gate_probability > 0.5 && self.gate_probability < 1.0) {
-            errs.push(format!("gate_probability = {} must be in (0.5, 1)", self.gate_probability));
+            bad(format!("gate_probability = {} must be in (0.5, 1)", self.gate_probability));
         }
         if self.confirm_m == 0 || self.confirm_m > self.confirm_n || self.confirm_n > 32 {
-            errs.push(format!(
+            bad(format!(
                 "confirm_m = {} of confirm_n = {}: need 1 <= m <= n <= 32",
                 self.confirm_m, self.confirm_n
             ));
         }
         if self.max_tracks == 0 {
-            errs.push("max_tracks must be positive".into());
+            bad("max_tracks must be positive".into());
         }
         if self.motion_window < 2 || !(self.motion_false_alarm > 0.0 && self.motion_false_alarm < 1.0) {
-            errs.push("motion_window must be at least 2 and motion_false_alarm in (0, 1)".into());
+            bad("motion_window must be at least 2 and motion_false_alarm in (0, 1)".into());
         }
-        if errs.is_empty() {
-            Ok(())
-        } else {
-            Err(errs.join("\n"))
-        }
+        positive(
+            path,
+            &[
+                ("vertical_q", self.vertical_q),
+                ("period_default_s", self.period_default_s),
+                ("reorder_window_s", self.reorder_window_s),
+                ("coast_after_s", self.coast_after_s),
+                ("drop_after_s", self.drop_after_s),
+                ("motion_interval_s", self.motion_interval_s),
+                ("vb_prior", self.vb_prior),
+                ("vb_prior_adsb", self.vb_prior_adsb),
+            ],
+            out,
+        );
+        not_negative(
+            path,
+            &[
+                ("adsb_time_sigma_gps_s", self.adsb_time_sigma_gps_s),
+                ("adsb_time_sigma_arrival_s", self.adsb_time_sigma_arrival_s),
+            ],
+            out,
+        );
+        self.sparse.validate(&format!("{path}.sparse"), out);
     }
 
     pub fn imm_spec(&self) -> Arc<ImmSpec> {
@@ -369,16 +361,22 @@ mod tests {
             models: vec![ModelConfig::Ta { accel: 30.0, q: 0.05 }, ModelConfig::Ta { accel: 1.0, q: 0.0 }],
             ..TrackConfig::default()
         };
-        let errs = bad.validate().unwrap_err();
-        assert!(errs.contains("models[0]: accel = 30 must be within +-20"), "{errs}");
-        assert!(errs.contains("models[1]: q = 0 must be positive"), "{errs}");
+        let mut errs = Vec::new();
+        bad.validate("core.track", &mut errs);
+        let said = |m: &str| errs.contains(&Problem::at("core.track", m));
+        assert!(said("models[0]: accel = 30 must be within +-20"), "{errs:?}");
+        assert!(said("models[1]: q = 0 must be positive"), "{errs:?}");
     }
 
     #[test]
     fn the_mlat_only_matrix_is_checked_and_can_be_turned_off() {
         let text = "[core.track]\nmlat_only = { stay_first = 0.5, to_first = 0.9 }\n";
         let err = core_of(text).validate().unwrap_err();
-        assert!(err.contains("mlat_only: stay_first = 0.5 and to_first = 0.9"), "{err}");
+        assert!(
+            err.iter().any(|p| p.table == "[core.track]"
+                && p.message.starts_with("mlat_only: stay_first = 0.5 and to_first = 0.9")),
+            "{err:?}"
+        );
         let off = TrackConfig {
             mlat_only: MlatOnlyConfig { enabled: false, ..Default::default() },
             ..Default::default()

@@ -32,6 +32,7 @@ use serde::{Deserialize, Serialize};
 use super::kf::Gaussian;
 use super::plane::Plane;
 use crate::mlat::solver::C_AIR;
+use crate::problem::{positive, Problem};
 
 /// The particle filter's parameters (`[core.track.sparse]`).
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -81,32 +82,33 @@ impl Default for SparseConfig {
 }
 
 impl SparseConfig {
-    pub fn validate(&self) -> Result<(), String> {
-        let mut errs = Vec::new();
+    /// Every problem of the table at `path` (`core.track.sparse`), into `out`.
+    pub fn validate(&self, path: &str, out: &mut Vec<Problem>) {
         if !(100..=100_000).contains(&self.particles) {
-            errs.push(format!("particles = {} must be 100 to 100000", self.particles));
+            out.push(Problem::at(path, format!("particles = {} must be 100 to 100000", self.particles)));
         }
         if !(self.resample_below > 0.0 && self.resample_below <= 1.0) {
-            errs.push(format!("resample_below = {} must be in (0, 1]", self.resample_below));
+            out.push(Problem::at(
+                path,
+                format!("resample_below = {} must be in (0, 1]", self.resample_below),
+            ));
         }
         if !(self.speed_ms[0] >= 0.0 && self.speed_ms[0] < self.speed_ms[1]) {
-            errs.push(format!("speed_ms = {:?} must be an increasing pair from 0", self.speed_ms));
+            out.push(Problem::at(
+                path,
+                format!("speed_ms = {:?} must be an increasing pair from 0", self.speed_ms),
+            ));
         }
-        for (k, v) in [
-            ("accel_ms2", self.accel_ms2),
-            ("max_range_m", self.max_range_m),
-            ("publish_sigma_m", self.publish_sigma_m),
-            ("start_after_s", self.start_after_s),
-        ] {
-            if !(v.is_finite() && v > 0.0) {
-                errs.push(format!("{k} = {v} must be positive"));
-            }
-        }
-        if errs.is_empty() {
-            Ok(())
-        } else {
-            Err(errs.join("\n"))
-        }
+        positive(
+            path,
+            &[
+                ("accel_ms2", self.accel_ms2),
+                ("max_range_m", self.max_range_m),
+                ("publish_sigma_m", self.publish_sigma_m),
+                ("start_after_s", self.start_after_s),
+            ],
+            out,
+        );
     }
 }
 

@@ -2,6 +2,8 @@
 
 use serde::Deserialize;
 
+use crate::problem::{not_negative, positive, Problem};
+
 #[derive(Clone, Debug, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MlatConfig {
@@ -62,6 +64,46 @@ impl Default for MlatConfig {
             calibrate: true,
             adsb_interval_s: 1.0,
             self_survey: false,
+        }
+    }
+}
+
+impl MlatConfig {
+    /// Every problem of the table at `path` (`core.mlat`), into `out`. A
+    /// timing sigma of zero would weigh a receiver infinitely; a negative
+    /// interval or age turns a test around.
+    pub fn validate(&self, path: &str, out: &mut Vec<Problem>) {
+        positive(
+            path,
+            &[
+                ("jitter_beast12_ns", self.jitter_beast12_ns),
+                ("jitter_gps_ns", self.jitter_gps_ns),
+                ("baro_sigma_m", self.baro_sigma_m),
+            ],
+            out,
+        );
+        not_negative(
+            path,
+            &[
+                ("min_separation_m", self.min_separation_m),
+                ("max_alt_age_s", self.max_alt_age_s),
+                ("alt_growth_mps", self.alt_growth_mps),
+                ("clock_phase_noise_ns", self.clock_phase_noise_ns),
+                ("clock_drift_walk_ppb", self.clock_drift_walk_ppb),
+                ("adsb_interval_s", self.adsb_interval_s),
+            ],
+            out,
+        );
+        for (name, v) in [
+            ("timestamp_offset_beast12_ns", self.timestamp_offset_beast12_ns),
+            ("timestamp_offset_gps_ns", self.timestamp_offset_gps_ns),
+        ] {
+            if !v.is_finite() {
+                out.push(Problem::at(path, format!("{name} = {v} must be a number")));
+            }
+        }
+        if self.min_sync_nacp > 11 {
+            out.push(Problem::at(path, format!("min_sync_nacp = {} must be 0 to 11", self.min_sync_nacp)));
         }
     }
 }
