@@ -102,3 +102,42 @@ fn driven_by_its_deadlines_the_core_never_spins_and_hands_out_every_group_on_tim
         tracks(&frame_events)
     );
 }
+
+/// Every per-aircraft table empties once its aircraft are no longer heard:
+/// the track and its conformance watch after the track's drop time, what
+/// decoding and multilateration remember after the aircraft's time to
+/// live, with nothing but time passing (`handle_timeout`).
+#[test]
+fn every_aircraft_table_ages_out_on_time_alone() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let capture = std::fs::read(root.join("fixtures/captures/surface/capture.txt")).unwrap();
+    let cfg = CoreConfig::default();
+    let mut core = Core::new(&cfg);
+    let mut reader = CaptureReader::new(&capture[..], "capture");
+    let mut last = f64::NEG_INFINITY;
+    while let Some(rec) = reader.next_record().unwrap() {
+        if let CaptureRecord::Frame(f) = &rec {
+            last = f.arrival;
+        }
+        core.handle_record(rec);
+        while core.poll_event().is_some() {}
+    }
+    let held = core.aircraft_held();
+    assert!(held.decoder > 1 && held.mlat > 1 && held.tracker > 1 && held.conformance > 0, "{held:?}");
+
+    let mut pass = |t: f64| {
+        core.handle_timeout(t);
+        while core.poll_event().is_some() {}
+        core.aircraft_held()
+    };
+    let tracks_gone = pass(last + cfg.track.drop_after_s + 2.0);
+    assert_eq!((tracks_gone.tracker, tracks_gone.conformance), (0, 0), "{tracks_gone:?}");
+    assert_eq!(
+        (tracks_gone.decoder, tracks_gone.mlat),
+        (held.decoder, held.mlat),
+        "what is remembered of an aircraft outlives its track"
+    );
+    // The decoder looks once a minute.
+    let all_gone = pass(last + cfg.aircraft_ttl_s + 62.0);
+    assert_eq!(all_gone, Default::default(), "before: {held:?}");
+}

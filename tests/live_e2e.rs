@@ -634,6 +634,9 @@ fn a_burst_of_frames_in_one_tcp_read_is_processed_whole() {
         "fuse1090_mlat_gps_time_jumps_total 0",
         "fuse1090_mlat_rejects_total{reason=\"residual\"} 0",
         "fuse1090_mlat_rejects_total{reason=\"ambiguous\"} 0",
+        // One aircraft decoded; one position, never paired, makes no track.
+        "fuse1090_aircraft_held{table=\"decoder\"} 1",
+        "fuse1090_aircraft_held{table=\"tracker\"} 0",
     ] {
         assert!(text.lines().any(|l| l == want), "{want} not in:\n{text}");
     }

@@ -7,7 +7,7 @@ use std::sync::atomic::Ordering;
 use super::outputs::Outputs;
 use super::record::RecordStats;
 use super::registry::Registry;
-use crate::core::{Back, CoreStats, Front};
+use crate::core::{AircraftHeld, Back, CoreStats, Front};
 
 /// The front stage's counters, sent with each batch for the stats line and
 /// the metrics, which the back thread writes (it knows the tracks).
@@ -18,6 +18,8 @@ pub(super) struct FrontSnapshot {
     pub mlat_fixes: u64,
     pub self_synced_fixes: u64,
     pub dispatched: u64,
+    /// The front's per-aircraft tables' sizes (the tracker's is the back's).
+    pub held: AircraftHeld,
 }
 
 /// The front thread's metrics, once a second: per receiver its network
@@ -170,6 +172,15 @@ pub(super) fn metrics(front: &FrontSnapshot, back: &Back, reg: &Registry, output
     // Copies a link delivered after their transmission was processed.
     metrics::counter!("fuse1090_late_copies_total").absolute(s.late_copies);
     metrics::gauge!("fuse1090_tracks").set(back.fuser().tracks() as f64);
+    let held = AircraftHeld { tracker: back.fuser().tracks(), ..front.held };
+    for (table, n) in [
+        ("decoder", held.decoder),
+        ("mlat", held.mlat),
+        ("conformance", held.conformance),
+        ("tracker", held.tracker),
+    ] {
+        metrics::gauge!("fuse1090_aircraft_held", "table" => table).set(n as f64);
+    }
     metrics::counter!("fuse1090_unknown_senders_total").absolute(reg.unknown_senders.load(Ordering::Relaxed));
     metrics::counter!("fuse1090_socket_errors_total").absolute(reg.socket_errors.load(Ordering::Relaxed));
     metrics::counter!("fuse1090_queue_drops_total").absolute(reg.queue_drops.load(Ordering::Relaxed));

@@ -285,6 +285,7 @@ impl FrontThread {
             mlat_fixes: self.front.mlat().stats.fixes,
             self_synced_fixes: self.front.mlat().stats.self_synced_fixes,
             dispatched: self.dispatched,
+            held: self.front.aircraft_held(),
         }
     }
 

@@ -79,6 +79,9 @@ pub struct Front {
     watched: FastMap<u32, Watched>,
     conformance: ConformanceConfig,
     drop_after_s: f64,
+    /// What is remembered of an aircraft outlives its last message by this
+    /// (s): the decoder's and the MLAT engine's state.
+    aircraft_ttl_s: f64,
     next_sweep: f64,
     /// When the receivers' next reports are due (data time).
     next_receivers: f64,
@@ -133,6 +136,7 @@ impl Front {
             watched: FastMap::default(),
             conformance: cfg.fuse.conformance.clone(),
             drop_after_s: cfg.track.drop_after_s,
+            aircraft_ttl_s: cfg.aircraft_ttl_s,
             next_sweep: f64::NEG_INFINITY,
             next_receivers: f64::NAN,
             advanced_to: f64::NEG_INFINITY,
@@ -202,6 +206,16 @@ impl Front {
         &mut self.mlat
     }
 
+    /// How many aircraft the front's tables hold (the tracker's is the back's).
+    pub fn aircraft_held(&self) -> super::AircraftHeld {
+        super::AircraftHeld {
+            decoder: self.decoder.aircraft_count(),
+            mlat: self.mlat.aircraft_count(),
+            conformance: self.watched.len(),
+            tracker: 0,
+        }
+    }
+
     /// Whether the conformance monitor distrusts an aircraft's ADS-B.
     pub fn is_suspect(&self, addr: u32) -> bool {
         self.watched.get(&addr).is_some_and(|w| w.monitor.suspect)
@@ -230,7 +244,8 @@ impl Front {
             self.next_sweep = now + 1.0;
             let drop = self.drop_after_s;
             self.watched.retain(|_, w| now - w.last_heard <= drop);
-            self.mlat.prune(now);
+            self.decoder.advance(now);
+            self.mlat.prune(now, self.aircraft_ttl_s);
             // Checked with the sweep, once a second: not with every frame.
             if self.next_receivers.is_nan() {
                 self.next_receivers = now + RECEIVER_REPORT_S;

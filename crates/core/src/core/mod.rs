@@ -47,7 +47,9 @@ pub struct CoreConfig {
     pub max_pending_groups: usize,
     /// Positions farther than this from the receiver that heard them are rejected (km).
     pub max_range_km: f64,
-    /// Aircraft not heard for this long are forgotten (s).
+    /// What is remembered of an aircraft (decoding and multilateration
+    /// state) is forgotten this long after its last message (s); its track
+    /// ends with `track.drop_after_s`. See [`AircraftHeld`].
     pub aircraft_ttl_s: f64,
     pub mlat: MlatConfig,
     pub track: TrackConfig,
@@ -302,4 +304,22 @@ impl Core {
     pub fn is_suspect(&self, addr: u32) -> bool {
         self.front.is_suspect(addr)
     }
+
+    /// How many aircraft each of the core's per-aircraft tables holds.
+    pub fn aircraft_held(&self) -> AircraftHeld {
+        AircraftHeld { tracker: self.back.fuser().tracks(), ..self.front.aircraft_held() }
+    }
+}
+
+/// How many aircraft each per-aircraft table holds. Every one ages out, on
+/// one of two lifetimes: what is remembered of an aircraft (its decoding
+/// and multilateration state) lives `aircraft_ttl_s` after its last
+/// message; its track, and the conformance monitor's watch over it, end
+/// with the track (`[core.track] drop_after_s`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct AircraftHeld {
+    pub decoder: usize,
+    pub mlat: usize,
+    pub conformance: usize,
+    pub tracker: usize,
 }

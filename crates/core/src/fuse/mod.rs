@@ -130,8 +130,11 @@ pub struct Fuser {
     /// Track numbers advance by this much (a cluster's partitions number
     /// theirs apart: `first + k * step`).
     id_step: u64,
-    /// Numbers a taken-over aircraft keeps (a cluster's checkpoint).
-    reserved_ids: FastMap<u32, u64>,
+    /// Numbers a taken-over aircraft keeps (a cluster's checkpoint), and
+    /// since when (data time; NaN until the first sweep after the take-over
+    /// sees it): kept for a track's drop time, as a track unheard that long
+    /// on one node starts again under a new number.
+    reserved_ids: FastMap<u32, (u64, f64)>,
     next_sweep: f64,
     monitor: ConflictMonitor,
     pub publish_source_tracks: bool,
@@ -177,7 +180,7 @@ impl Fuser {
     /// this fuser would give.
     pub fn track_numbers(&self) -> (Vec<(u32, u64)>, u64) {
         let mut ids: Vec<(u32, u64)> = self.aircraft.iter().map(|(&addr, a)| (addr, a.id)).collect();
-        ids.extend(self.reserved_ids.iter().map(|(&a, &i)| (a, i)));
+        ids.extend(self.reserved_ids.iter().map(|(&a, &(i, _))| (a, i)));
         ids.sort_unstable();
         (ids, self.next_id)
     }
@@ -185,7 +188,7 @@ impl Fuser {
     /// Takes a checkpoint's numbers: these aircraft keep theirs when their
     /// tracks start here, and new ones continue after `next`.
     pub fn keep_track_numbers(&mut self, ids: &[(u32, u64)], next: u64) {
-        self.reserved_ids.extend(ids.iter().copied());
+        self.reserved_ids.extend(ids.iter().map(|&(a, i)| (a, (i, f64::NAN))));
         self.next_id = self.next_id.max(next);
     }
 
@@ -195,6 +198,12 @@ impl Fuser {
 
     pub fn tracks(&self) -> usize {
         self.aircraft.len()
+    }
+
+    /// Track numbers a cluster's checkpoint reserved, not yet taken up or
+    /// forgotten.
+    pub fn reserved_numbers(&self) -> usize {
+        self.reserved_ids.len()
     }
 
     /// Identity and state from messages that carry no position.
@@ -286,7 +295,7 @@ impl Fuser {
                 self.stats.table_full += 1;
                 return;
             }
-            let id = self.reserved_ids.remove(&addr).unwrap_or_else(|| {
+            let id = self.reserved_ids.remove(&addr).map(|(id, _)| id).unwrap_or_else(|| {
                 self.next_id += self.id_step;
                 self.next_id - self.id_step
             });
@@ -546,6 +555,12 @@ impl Fuser {
                 keep
             });
             self.sparse_active -= filters_dropped;
+            self.reserved_ids.retain(|_, (_, since)| {
+                if since.is_nan() {
+                    *since = now;
+                }
+                now - *since <= drop
+            });
             self.stats.tracks_dropped += (before - self.aircraft.len()) as u64;
         }
     }

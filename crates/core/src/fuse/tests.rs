@@ -365,3 +365,32 @@ fn particle_filters_are_bounded_and_give_way_to_a_fix() {
     let s = f.stats().sparse;
     assert_eq!((s.handed_over, s.started), (1, 2), "{s:?}");
 }
+
+/// A cluster's checkpoint reserves track numbers: an aircraft whose track
+/// starts again within the track's drop time keeps its number, and the
+/// numbers of aircraft not heard again are forgotten after it.
+#[test]
+fn reserved_track_numbers_are_taken_up_or_forgotten() {
+    let tcfg = TrackConfig::default();
+    let drop = tcfg.drop_after_s;
+    let mut f = Fuser::new(FuseConfig::default(), tcfg, false);
+    f.keep_track_numbers(&[(1, 41), (2, 42)], 50);
+    let mut out = Vec::new();
+    f.advance(100.0, &mut out);
+    for k in 0..5 {
+        let t = 100.0 + k as f64;
+        let (lat, lon, _) = at(t);
+        f.on_measurement(1, Some(8), pos(t, lat, lon), t, &mut out);
+    }
+    let id = out.iter().find_map(|o| match o {
+        Output::Track(r) => Some(r.id),
+        _ => None,
+    });
+    assert_eq!(id, Some(41), "aircraft 1 kept its number");
+    assert_eq!(f.reserved_numbers(), 1);
+    f.advance(100.0 + drop - 1.0, &mut out);
+    assert_eq!(f.reserved_numbers(), 1, "within the drop time");
+    f.advance(100.0 + drop + 1.5, &mut out);
+    assert_eq!(f.reserved_numbers(), 0, "aircraft 2's number forgotten");
+    assert_eq!(f.track_numbers().1, 50, "new numbers still continue after the checkpoint's");
+}

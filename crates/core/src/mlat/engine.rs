@@ -144,9 +144,8 @@ const CLOCK_JUMP_S: f64 = 5.0;
 /// that looks taken at every fix would count one aircraft hundreds of times
 /// and make the difference look surer than it is.
 const BARO_LOOK_EVERY_S: f64 = 10.0;
-/// How long an aircraft's MLAT state outlives its last use, and a banned
-/// sync source's (a spoofer that pauses does not become honest).
-pub const AIRCRAFT_TTL_S: f64 = 600.0;
+/// How long a banned sync source is remembered (a spoofer that pauses does
+/// not become honest); other aircraft live the core's `aircraft_ttl_s`.
 pub const BANNED_TTL_S: f64 = 86_400.0;
 /// With `self_survey`, a receiver's survey is looked at every this many measurements.
 const SURVEY_CHECK_EVERY: u64 = 200;
@@ -314,18 +313,19 @@ impl Mlat {
         self.stats.rejects.add(why);
     }
 
-    /// Forgets aircraft not heard of for [`AIRCRAFT_TTL_S`] (a banned sync
-    /// source for [`BANNED_TTL_S`]): over weeks the table would otherwise
-    /// hold every address ever heard. Nothing older than a few minutes is
-    /// used anyway (altitudes, fixes and attempts are read within seconds).
-    pub fn prune(&mut self, now: f64) {
+    /// Forgets aircraft not heard of for `ttl_s` (the core's
+    /// `aircraft_ttl_s`, as the decoder; a banned sync source for
+    /// [`BANNED_TTL_S`]): over weeks the table would otherwise hold every
+    /// address ever heard. Nothing older than a few minutes is used anyway
+    /// (altitudes, fixes and attempts are read within seconds).
+    pub fn prune(&mut self, now: f64, ttl_s: f64) {
         self.geometric_baro.prune(now);
         self.aircraft.retain(|_, a| {
             let newest = [a.alt_ft.map(|x| x.1), a.last_fix.map(|x| x.1), a.last_tried, a.last_adsb]
                 .into_iter()
                 .flatten()
                 .fold(f64::NEG_INFINITY, f64::max);
-            let ttl = if a.sync_banned { BANNED_TTL_S } else { AIRCRAFT_TTL_S };
+            let ttl = if a.sync_banned { BANNED_TTL_S.max(ttl_s) } else { ttl_s };
             now - newest <= ttl
         });
     }

@@ -237,10 +237,7 @@ impl Decoder {
         };
         self.stats.mode_s += 1;
         self.stats.by_df[msg.df as usize] += 1;
-        if t.is_finite() && t > self.newest_t {
-            self.newest_t = t;
-        }
-        self.maybe_purge();
+        self.advance(t);
 
         if msg.parity == Parity::Bad && matches!(msg.df, 17 | 18) {
             self.try_correct(frame.bytes(), &mut msg);
@@ -392,6 +389,16 @@ impl Decoder {
         } else {
             self.stats.corrected_unknown += 1;
         }
+    }
+
+    /// Time moved on to `t` (s, the frames' time scale): aircraft not heard
+    /// for the time to live are forgotten, checked once a minute. A frame
+    /// moves it too; told the time, an idle decoder forgets as well.
+    pub fn advance(&mut self, t: f64) {
+        if t.is_finite() && t > self.newest_t {
+            self.newest_t = t;
+        }
+        self.maybe_purge();
     }
 
     fn maybe_purge(&mut self) {

@@ -58,9 +58,14 @@ impl GroupCtx<'_> {
                 [c[1][0] * inflation, v + c[1][1] * inflation],
             ];
             self.stats.conformance_checks += 1;
-            let w =
-                self.watched.entry(addr).or_insert(Watched { monitor: Monitor::default(), last_heard: now });
-            w.last_heard = now;
+            // Heard when its first copy arrived, not when the group was
+            // handed out (at the end of a capture, much later).
+            let heard = g.first_arrival;
+            let w = self
+                .watched
+                .entry(addr)
+                .or_insert(Watched { monitor: Monitor::default(), last_heard: heard });
+            w.last_heard = heard;
             if let Some(suspect) = w.monitor.push(self.conformance, d, s) {
                 let (offset_m, nis) = (w.monitor.last_offset_m, w.monitor.last_nis);
                 cmds.push(Cmd::Suspect { addr, t, suspect, offset_m, nis });

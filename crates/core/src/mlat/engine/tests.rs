@@ -344,12 +344,13 @@ fn aircraft_are_forgotten_once_unheard_for_their_time_to_live() {
         m.on_group(&g, t + k as f64);
     }
     assert_eq!(m.aircraft_count(), 50);
-    m.prune(t + 49.0 + AIRCRAFT_TTL_S - 9.5);
+    let ttl = 300.0;
+    m.prune(t + 49.0 + ttl - 9.5, ttl);
     assert_eq!(m.aircraft_count(), 10, "the last ten heard within the time to live");
     m.aircraft.get_mut(&0x100031).unwrap().sync_banned = true;
-    m.prune(t + 49.0 + AIRCRAFT_TTL_S + 1.0);
+    m.prune(t + 49.0 + ttl + 1.0, ttl);
     assert_eq!(m.aircraft_count(), 1, "a banned sync source is remembered longer");
-    m.prune(t + 49.0 + BANNED_TTL_S + 1.0);
+    m.prune(t + 49.0 + BANNED_TTL_S + 1.0, ttl);
     assert_eq!(m.aircraft_count(), 0);
 }
 
