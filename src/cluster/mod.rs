@@ -385,73 +385,102 @@ pub fn run(cfg: &Config, path: Option<&Path>, capture: Option<&Path>, output: Op
     rt.block_on(async move {
         let nats = std::sync::Arc::new(Nats::connect(&cluster).await?);
         let worker_stats = std::sync::Arc::new(std::sync::Mutex::new(worker::WorkerStats::default()));
+        let roles = Roles { cfg, cluster: &cluster, nats: &nats, path, capture, output };
+        let (mut tasks, until_done) = roles.spawn(&worker_stats)?;
+        // A replay (or a publisher writing a file) ends with its input.
+        let ends = capture.is_some() || output.is_some();
+        wait(&mut tasks, until_done, ends).await?;
+        // What was published reaches the server, unless it is gone.
+        let _ = tokio::time::timeout(Duration::from_secs(2), nats.client.flush()).await;
         // A worker says what it did when it stops.
-        let said = worker_stats.clone();
-        let is_worker = cluster.has(Role::Worker);
-        let show = move || {
-            if is_worker {
-                println!("{}", *said.lock().expect("stats lock"));
-            }
-        };
+        if cluster.has(Role::Worker) {
+            println!("{}", *worker_stats.lock().expect("stats lock"));
+        }
+        Ok(())
+    })
+}
+
+/// What this process was asked to run, and with what.
+struct Roles<'a> {
+    cfg: &'a Config,
+    cluster: &'a ClusterConfig,
+    nats: &'a std::sync::Arc<Nats>,
+    path: Option<&'a Path>,
+    capture: Option<&'a Path>,
+    output: Option<&'a Path>,
+}
+
+impl Roles<'_> {
+    /// Each role's task started; the tasks whose end ends a replay.
+    fn spawn(
+        &self,
+        worker_stats: &std::sync::Arc<std::sync::Mutex<worker::WorkerStats>>,
+    ) -> Result<(tokio::task::JoinSet<Result<()>>, Vec<tokio::task::Id>)> {
+        let (cfg, cluster) = (self.cfg, self.cluster);
         let mut tasks = tokio::task::JoinSet::new();
         let mut until_done = Vec::new();
-        if let Some(path) = capture {
-            let (nats, cluster, path) = (nats.clone(), cluster.clone(), path.to_path_buf());
+        if let Some(path) = self.capture {
+            let (nats, cluster, path) = (self.nats.clone(), cluster.clone(), path.to_path_buf());
             until_done.push(
                 tasks.spawn(async move { ingest::replay(&nats, &cluster, &path).await.map(|_| ()) }).id(),
             );
         } else if cluster.has(Role::Ingest) {
             // Live: the daemon's inputs, with the frames put on NATS.
-            let sink = crate::live::Sink::Cluster(nats.clone(), cluster.clone());
-            let (path, cfg) = (path.context("live ingest needs --config")?.to_path_buf(), cfg.clone());
+            let sink = crate::live::Sink::Cluster(self.nats.clone(), cluster.clone());
+            let (path, cfg) = (self.path.context("live ingest needs --config")?.to_path_buf(), cfg.clone());
             let (shutdown, reloads) = crate::live::signals(path)?;
             tasks.spawn(async move { crate::live::serve(cfg, Some(sink), shutdown, reloads).await });
         }
         if cluster.has(Role::Clock) {
-            let (nats, cluster, mlat) = (nats.clone(), cluster.clone(), cfg.core.mlat.clone());
+            let (nats, cluster, mlat) = (self.nats.clone(), cluster.clone(), cfg.core.mlat.clone());
             tasks.spawn(async move { clock::run(&nats, &cluster, &mlat).await.map(|_| ()) });
         }
         if cluster.has(Role::Worker) {
             let (nats, cluster, core, shown) =
-                (nats.clone(), cluster.clone(), cfg.core.clone(), worker_stats.clone());
+                (self.nats.clone(), cluster.clone(), cfg.core.clone(), worker_stats.clone());
             tasks.spawn(async move { worker::run(nats, cluster, core, shown).await });
         }
         if cluster.has(Role::Publisher) {
             // The metrics endpoint is a live ingest's when it shares the process.
             let mut config = cfg.clone();
-            if cluster.has(Role::Ingest) && capture.is_none() {
+            if cluster.has(Role::Ingest) && self.capture.is_none() {
                 config.service.metrics_listen = None;
             }
-            let (nats, cluster) = (nats.clone(), cluster.clone());
-            let output = output.map(Path::to_path_buf);
+            let (nats, cluster) = (self.nats.clone(), cluster.clone());
+            let output = self.output.map(Path::to_path_buf);
             until_done.push(
                 tasks
                     .spawn(async move { publisher::run(&nats, &cluster, &config, output).await.map(|_| ()) })
                     .id(),
             );
         }
-        let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
-        loop {
-            tokio::select! {
-                done = tasks.join_next_with_id() => match done {
-                    None => return Ok(()),
-                    Some(Ok((id, res))) => {
-                        res?;
-                        until_done.retain(|&t| t != id);
-                        // A replay's publisher (or a lone ingest) is done: so is the process.
-                        if until_done.is_empty() && (capture.is_some() || output.is_some()) {
-                            nats.client.flush().await.ok();
-                            show();
-                            return Ok(());
-                        }
+        Ok((tasks, until_done))
+    }
+}
+
+/// Until a task fails, SIGTERM or Ctrl-C, every task has ended, or (with
+/// `ends`) the tasks in `until_done` have.
+async fn wait(
+    tasks: &mut tokio::task::JoinSet<Result<()>>,
+    mut until_done: Vec<tokio::task::Id>,
+    ends: bool,
+) -> Result<()> {
+    let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
+    loop {
+        tokio::select! {
+            done = tasks.join_next_with_id() => match done {
+                None => return Ok(()),
+                Some(Ok((id, res))) => {
+                    res?;
+                    until_done.retain(|&t| t != id);
+                    if until_done.is_empty() && ends {
+                        return Ok(());
                     }
-                    Some(Err(e)) => bail!("a cluster task failed: {e}"),
-                },
-                _ = term.recv() => break,
-                _ = tokio::signal::ctrl_c() => break,
-            }
+                }
+                Some(Err(e)) => bail!("a cluster task failed: {e}"),
+            },
+            _ = term.recv() => return Ok(()),
+            _ = tokio::signal::ctrl_c() => return Ok(()),
         }
-        show();
-        Ok(())
-    })
+    }
 }

@@ -202,13 +202,18 @@ pub async fn run(
     config: &Config,
     output: Option<PathBuf>,
 ) -> Result<PublisherStats> {
-    let (mut sinks, http_tasks) = Sinks::start(config, output).await?;
-    let mut marks = Watermarks::new(cfg.partitions);
-    let mut cross = CrossPartition::new(&config.core);
-    let mut stats = PublisherStats::default();
+    let (sinks, http_tasks) = Sinks::start(config, output).await?;
+    let mut p = Publisher {
+        sinks,
+        marks: Watermarks::new(cfg.partitions),
+        cross: CrossPartition::new(&config.core),
+        stats: PublisherStats::default(),
+        ids: Vec::new(),
+        alerts: Vec::new(),
+        clock_ended: false,
+    };
     // The receivers, in declaration order, for the records that name them.
     let mut declared = nats.receiver_declarations().await?;
-    let mut ids: Vec<String> = Vec::new();
     let name = format!("{}-publisher", cfg.name);
     let consumer = nats
         .events
@@ -224,18 +229,14 @@ pub async fn run(
         .await
         .context("cannot consume the events")?;
     let mut msgs = consumer.messages().await?;
-    let mut alerts = Vec::new();
-    // A replay ends with every partition's last batch and the clock's last
-    // receiver records, which may come a little after.
-    let mut clock_ended = false;
     loop {
-        let ended = marks.all_ended();
+        let ended = p.marks.all_ended();
         let m = tokio::select! {
             // Declarations first: an event may name a receiver only just declared.
             biased;
             d = declared.next() => {
                 if let Some(d) = d {
-                    ids.push(d?.id);
+                    p.ids.push(d?.id);
                 }
                 continue;
             }
@@ -247,77 +248,97 @@ pub async fn run(
         };
         let Some(m) = m else { break };
         let m = m.map_err(|e| anyhow::anyhow!("event stream: {e}"))?;
+        if p.on_message(&m)? {
+            break;
+        }
+    }
+    p.sinks.file.flush().context("writing output")?;
+    http_tasks.stop(std::time::Duration::from_secs(2)).await;
+    let stats = p.stats;
+    println!(
+        "publisher: batches={} frames={} events={} conflicts={} replayed_batches={} bad_batches={} unknown_receivers={}",
+        stats.batches,
+        stats.frames,
+        stats.events,
+        p.cross.raised,
+        stats.replayed_batches,
+        stats.bad_batches,
+        stats.unknown_receivers
+    );
+    Ok(stats)
+}
+
+/// The publisher's state between messages.
+struct Publisher {
+    sinks: Sinks,
+    marks: Watermarks,
+    cross: CrossPartition,
+    stats: PublisherStats,
+    /// The receivers' ids, in declaration order.
+    ids: Vec<String>,
+    alerts: Vec<Event>,
+    /// A replay ends with every partition's last batch and the clock's
+    /// last receiver records, which may come a little after.
+    clock_ended: bool,
+}
+
+impl Publisher {
+    /// One message of the events stream sent on; true when the replay has
+    /// ended.
+    fn on_message(&mut self, m: &async_nats::jetstream::Message) -> Result<bool> {
         let last = m.subject.rsplit('.').next().unwrap_or("");
         if last == super::CLOCK_RECORDS {
             // The network's receiver records: not a partition's, no time to mark.
             match wire::decode::<Vec<Event>>(&m.payload) {
                 Ok(events) => {
                     let t = super::header_f64(&m.message, header::TIME).unwrap_or(f64::NAN);
-                    sinks.send(&events, &ids, t, &mut stats)?;
+                    self.sinks.send(&events, &self.ids, t, &mut self.stats)?;
                 }
-                Err(_) => stats.bad_batches += 1,
+                Err(_) => self.stats.bad_batches += 1,
             }
-            clock_ended |= super::is_end(&m.message);
-            if marks.all_ended() && clock_ended {
-                break;
-            }
-            continue;
+            self.clock_ended |= super::is_end(&m.message);
+            return Ok(self.marks.all_ended() && self.clock_ended);
         }
         let p = last.parse::<usize>().ok();
         let t = super::header_f64(&m.message, header::TIME);
         let events = match wire::decode::<Vec<Event>>(&m.payload) {
             Ok(events) => events,
             Err(e) => {
-                stats.bad_batches += 1;
+                self.stats.bad_batches += 1;
                 tracing::warn!(error = %e, "event batch unreadable: skipped");
-                continue;
+                return Ok(false);
             }
         };
         let (mark, now) = match (p, t) {
-            (Some(p), Some(t)) => (marks.mark(p, t, super::is_end(&m.message)), t),
+            (Some(p), Some(t)) => (self.marks.mark(p, t, super::is_end(&m.message)), t),
             _ => (Mark::Unknown, f64::NAN),
         };
         match mark {
             Mark::Unknown => {
-                stats.bad_batches += 1;
-                continue;
+                self.stats.bad_batches += 1;
+                return Ok(false);
             }
             Mark::Replayed => {
-                stats.replayed_batches += 1;
-                continue;
+                self.stats.replayed_batches += 1;
+                return Ok(false);
             }
-            Mark::New => stats.batches += 1,
+            Mark::New => self.stats.batches += 1,
         }
-        stats.frames += super::header_f64(&m.message, header::FRAMES).unwrap_or(0.0) as u64;
-        sinks.send(&events, &ids, now, &mut stats)?;
+        self.stats.frames += super::header_f64(&m.message, header::FRAMES).unwrap_or(0.0) as u64;
+        self.sinks.send(&events, &self.ids, now, &mut self.stats)?;
         for ev in &events {
-            cross.on_event(ev);
+            self.cross.on_event(ev);
         }
-        let common = marks.common();
+        let common = self.marks.common();
         if common.is_finite() {
-            cross.advance(common, &mut alerts);
+            self.cross.advance(common, &mut self.alerts);
         }
-        if !alerts.is_empty() {
-            sinks.send(&alerts, &ids, now, &mut stats)?;
-            alerts.clear();
+        if !self.alerts.is_empty() {
+            self.sinks.send(&self.alerts, &self.ids, now, &mut self.stats)?;
+            self.alerts.clear();
         }
-        if marks.all_ended() && clock_ended {
-            break;
-        }
+        Ok(self.marks.all_ended() && self.clock_ended)
     }
-    sinks.file.flush().context("writing output")?;
-    http_tasks.stop(std::time::Duration::from_secs(2)).await;
-    println!(
-        "publisher: batches={} frames={} events={} conflicts={} replayed_batches={} bad_batches={} unknown_receivers={}",
-        stats.batches,
-        stats.frames,
-        stats.events,
-        cross.raised,
-        stats.replayed_batches,
-        stats.bad_batches,
-        stats.unknown_receivers
-    );
-    Ok(stats)
 }
 
 #[cfg(test)]

@@ -7,7 +7,8 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 
 use crate::feed::capture::ClockKind;
-use crate::feed::{detect_format, parser_for, FeedEvent, InputFormat};
+use crate::feed::{detect_format, parser_for, FeedEvent, FeedStats, InputFormat};
+use crate::modes::decoder::DecodeStats;
 use crate::modes::json::DecodeRecord;
 use crate::modes::{Decoder, DecoderConfig};
 
@@ -36,20 +37,7 @@ pub fn run(args: DecodeArgs) -> Result<()> {
     };
     let name = args.input.clone().unwrap_or_else(|| "stdin".into());
     let mut buf = vec![0u8; 1 << 16];
-    // Read a prefix for format detection.
-    let mut filled = 0;
-    while filled < 4096 {
-        let n = input.read(&mut buf[filled..]).with_context(|| format!("reading {name}"))?;
-        if n == 0 {
-            break;
-        }
-        filled += n;
-    }
-    let format = match args.format.or_else(|| detect_format(&buf[..filled])) {
-        Some(f) => f,
-        None if filled == 0 => bail!("{name} is empty"),
-        None => bail!("{name} is not Mode S data (neither Beast binary, AVR text nor hex lines)"),
-    };
+    let (format, filled) = detect(&mut input, &mut buf, args.format, &name)?;
     let mut parser = parser_for(format);
     let mut decoder = Decoder::new(DecoderConfig { reference: args.reference, ..Default::default() });
     let mut out = BufWriter::new(std::io::stdout().lock());
@@ -94,9 +82,40 @@ pub fn run(args: DecodeArgs) -> Result<()> {
             return Err(e).context("writing output");
         }
     }
-    let fs = parser.stats();
-    let ds = decoder.stats();
-    eprintln!(
+    let (fs, ds) = (parser.stats(), decoder.stats());
+    eprintln!("{}", summary(fs, ds, decoder.aircraft_count()));
+    if ds.mode_s == 0 {
+        bail!("{name}: no Mode S frames found ({} bytes of {format:?} input)", fs.bytes);
+    }
+    Ok(())
+}
+
+/// Reads a prefix of the input into `buf` and finds its format (the one
+/// given wins); the format and how much of `buf` was read.
+fn detect(
+    input: &mut dyn Read,
+    buf: &mut [u8],
+    given: Option<InputFormat>,
+    name: &str,
+) -> Result<(InputFormat, usize)> {
+    let mut filled = 0;
+    while filled < 4096 {
+        let n = input.read(&mut buf[filled..]).with_context(|| format!("reading {name}"))?;
+        if n == 0 {
+            break;
+        }
+        filled += n;
+    }
+    match given.or_else(|| detect_format(&buf[..filled])) {
+        Some(f) => Ok((f, filled)),
+        None if filled == 0 => bail!("{name} is empty"),
+        None => bail!("{name} is not Mode S data (neither Beast binary, AVR text nor hex lines)"),
+    }
+}
+
+/// The run's counts, for stderr.
+fn summary(fs: &FeedStats, ds: &DecodeStats, aircraft: usize) -> String {
+    format!(
         "decode: {} frames ({} Mode S, {} Mode A/C), {} parity ok, {} corrected, {} parity bad, \
          {} address/parity from unknown addresses, {} garbage bytes, {} broken frames, \
          {} positions ({} unconfirmed), {} aircraft; Comm-B: {} identified, {} ambiguous, \
@@ -112,14 +131,10 @@ pub fn run(args: DecodeArgs) -> Result<()> {
         fs.broken_frames,
         ds.positions_reliable,
         ds.positions_unconfirmed,
-        decoder.aircraft_count(),
+        aircraft,
         ds.commb.identified,
         ds.commb.ambiguous,
         ds.commb.contradicted,
         ds.commb.no_register,
-    );
-    if ds.mode_s == 0 {
-        bail!("{name}: no Mode S frames found ({} bytes of {format:?} input)", fs.bytes);
-    }
-    Ok(())
+    )
 }

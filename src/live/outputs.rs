@@ -112,6 +112,53 @@ fn udp_socket(cfg: &OutputConfig, addr: SocketAddr) -> std::io::Result<UdpSocket
 /// reader that stops reading costs lines, never the core.
 const STDOUT_QUEUE: usize = 4096;
 
+impl Destination {
+    /// Each payload a line for the stdout writer; what its queue cannot
+    /// take is dropped and counted (a slow reader must not stall the core).
+    fn send_stdout(&mut self, payloads: &[Vec<u8>], now: f64) {
+        let writer = stdout_writer();
+        for p in payloads {
+            writer.pending.fetch_add(1, Ordering::AcqRel);
+            let sent = writer.tx.try_send(p.clone());
+            if sent.is_err() {
+                writer.pending.fetch_sub(1, Ordering::AcqRel);
+            }
+            match sent {
+                Ok(()) => self.sent += 1,
+                Err(TrySendError::Full(_)) => self.dropped += 1,
+                Err(TrySendError::Disconnected(_)) => self.errors += 1,
+            }
+        }
+        if self.dropped > 0 && now - self.last_error_log > 10.0 {
+            self.last_error_log = now;
+            tracing::warn!(
+                dropped = self.dropped,
+                "stdout output: its reader keeps up too slowly; lines dropped"
+            );
+        }
+    }
+
+    /// Each payload a datagram; failures counted, logged at most every 10 s.
+    fn send_udp(&mut self, payloads: &[Vec<u8>], now: f64) {
+        let (Some(sock), Some(addr)) = (&self.socket, self.cfg.address) else {
+            self.errors += payloads.len() as u64;
+            return;
+        };
+        for p in payloads {
+            match sock.send(p) {
+                Ok(_) => self.sent += 1,
+                Err(e) => {
+                    self.errors += 1;
+                    if now - self.last_error_log > 10.0 {
+                        self.last_error_log = now;
+                        tracing::warn!(address = %addr, errors = self.errors, "output: {e}");
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// The process's one stdout writer (every stdout output of every
 /// configuration shares it): a queue and the count of lines its writes failed.
 struct Stdout {
@@ -259,43 +306,9 @@ impl Outputs {
                 }),
             };
             if d.cfg.kind == OutputKind::Stdout {
-                let writer = stdout_writer();
-                for p in payloads.iter() {
-                    writer.pending.fetch_add(1, Ordering::AcqRel);
-                    let sent = writer.tx.try_send(p.clone());
-                    if sent.is_err() {
-                        writer.pending.fetch_sub(1, Ordering::AcqRel);
-                    }
-                    match sent {
-                        Ok(()) => d.sent += 1,
-                        Err(TrySendError::Full(_)) => d.dropped += 1,
-                        Err(TrySendError::Disconnected(_)) => d.errors += 1,
-                    }
-                }
-                if d.dropped > 0 && now - d.last_error_log > 10.0 {
-                    d.last_error_log = now;
-                    tracing::warn!(
-                        dropped = d.dropped,
-                        "stdout output: its reader keeps up too slowly; lines dropped"
-                    );
-                }
-                continue;
-            }
-            let (Some(sock), Some(addr)) = (&d.socket, d.cfg.address) else {
-                d.errors += payloads.len() as u64;
-                continue;
-            };
-            for p in payloads.iter() {
-                match sock.send(p) {
-                    Ok(_) => d.sent += 1,
-                    Err(e) => {
-                        d.errors += 1;
-                        if now - d.last_error_log > 10.0 {
-                            d.last_error_log = now;
-                            tracing::warn!(address = %addr, errors = d.errors, "output: {e}");
-                        }
-                    }
-                }
+                d.send_stdout(payloads, now);
+            } else {
+                d.send_udp(payloads, now);
             }
         }
     }

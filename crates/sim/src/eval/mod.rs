@@ -332,7 +332,70 @@ pub fn evaluate(truth: &Truth, records: impl BufRead) -> Result<Report> {
 
 /// As [`evaluate`], with the receivers' geometry for the MLAT rows' bound.
 pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geometry>) -> Result<Report> {
-    // (source, hex, track id) -> accumulated errors.
+    let Records { accs, unknown, latest_receiver } = read_records(truth, records, geometry)?;
+    // Per aircraft rows (tracks of one aircraft merged), then overall per source.
+    let mut per: BTreeMap<(String, String), (Acc, usize)> = BTreeMap::new();
+    for ((source, hex, _id), acc) in accs {
+        let mean_err = acc.h_err.iter().sum::<f64>() / acc.h_err.len().max(1) as f64;
+        let e = per.entry((source, hex)).or_default();
+        e.1 += (mean_err > FALSE_TRACK_M) as usize;
+        e.0.times.extend(acc.times);
+        e.0.h_err.extend(acc.h_err);
+        e.0.v_err.extend(acc.v_err);
+        e.0.nees.extend(acc.nees);
+        e.0.crb.extend(acc.crb);
+    }
+    // Before `coverage` sorts the times apart from their errors.
+    let fusion = compare_fusion(&per);
+    let mut aircraft_rows = Vec::new();
+    let mut overall: BTreeMap<String, Pooled> = BTreeMap::new();
+    for ((source, hex), (mut acc, false_tracks)) in per {
+        acc.batches = minute_batches(&acc.nees);
+        let span = truth.span(&hex).unwrap_or((0.0, 0.0));
+        let mut near: Vec<f64> =
+            acc.times.iter().zip(&acc.h_err).filter(|&(_, &e)| e <= 1000.0).map(|(&t, _)| t).collect();
+        let (cont_1km, _) = coverage(&mut near, span);
+        let (cont, breaks) = coverage(&mut acc.times, span);
+        aircraft_rows.push(row(&source, &hex, 1, &acc, (cont, cont_1km), breaks, false_tracks));
+        // The tracks of aircraft without ADS-B also in a row of their own:
+        // what multilateration and Mode S alone give.
+        let mode_s_only = matches!(source.as_str(), "fused" | "mlat") && truth.adsb.get(&hex) == Some(&false);
+        let rows = [Some(source.clone()), mode_s_only.then(|| format!("{source}:mode-s-only"))];
+        for key in rows.into_iter().flatten() {
+            let o = overall.entry(key).or_default();
+            o.acc.h_err.extend(&acc.h_err);
+            o.acc.v_err.extend(&acc.v_err);
+            o.acc.nees.extend(&acc.nees);
+            o.acc.crb.extend(&acc.crb);
+            o.acc.batches.extend(&acc.batches);
+            o.aircraft += 1;
+            o.cont += cont;
+            o.cont_1km += cont_1km;
+            o.breaks += breaks;
+            o.false_tracks += false_tracks;
+        }
+    }
+    let overall = overall
+        .into_iter()
+        .map(|(source, o)| {
+            let n = o.aircraft as f64;
+            row(&source, "all", o.aircraft, &o.acc, (o.cont / n, o.cont_1km / n), o.breaks, o.false_tracks)
+        })
+        .collect();
+    let receivers = receivers::compare(&truth.receivers, &latest_receiver);
+    Ok(Report { overall, aircraft: aircraft_rows, unknown_records: unknown, fusion, receivers })
+}
+
+/// What a track stream's records add up to: errors per (source, hex,
+/// track id), the records of unknown aircraft, each receiver's latest record.
+struct Records {
+    accs: BTreeMap<(String, String, String), Acc>,
+    unknown: usize,
+    latest_receiver: BTreeMap<String, Value>,
+}
+
+/// Reads a track stream against the truth.
+fn read_records(truth: &Truth, records: impl BufRead, geometry: Option<&Geometry>) -> Result<Records> {
     let mut accs: BTreeMap<(String, String, String), Acc> = BTreeMap::new();
     let mut unknown = 0;
     let mut latest_receiver: BTreeMap<String, Value> = BTreeMap::new();
@@ -377,51 +440,22 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
             }
             continue;
         };
-        let e = en_offset(&tp, lat, lon);
-        let acc = accs.entry((source, hex, id)).or_default();
-        acc.times.push(t);
-        acc.h_err.push(e[0].hypot(e[1]));
-        if let Some(alt) = v["alt_m"].as_f64() {
-            acc.v_err.push(alt - tp.alt);
-        }
-        if let (Some(g), Some(ids)) = (geometry, v["receivers"].as_array()) {
-            let (pos, sig): (Vec<[f64; 3]>, Vec<f64>) =
-                ids.iter().filter_map(|id| g.receivers.get(id.as_str()?)).copied().unzip();
-            let alt = v["altitude_used"].as_bool().unwrap_or(false).then_some(g.alt_sigma_m);
-            let truth_ecef = fuse1090_core::geo::geodetic_to_ecef(tp.lat, tp.lon, tp.alt);
-            if let Some(c) = fuse1090_core::mlat::solver::crb_en(&pos, &sig, alt, truth_ecef) {
-                acc.crb.push(c[0][0] + c[1][1]);
-            }
-        }
-        if let Some(c) = v["cov_en"].as_array() {
-            let g = |r: usize, k: usize| c.get(r).and_then(|x| x.get(k)).and_then(Value::as_f64);
-            if let (Some(a), Some(b), Some(cc), Some(d)) = (g(0, 0), g(0, 1), g(1, 0), g(1, 1)) {
-                let det = a * d - b * cc;
-                if det > 0.0 {
-                    acc.nees.push((t, (d * e[0] * e[0] - (b + cc) * e[0] * e[1] + a * e[1] * e[1]) / det));
-                }
-            }
-        }
+        accs.entry((source, hex, id)).or_default().add(&v, &tp, t, en_offset(&tp, lat, lon), geometry);
     }
-    // Per aircraft rows (tracks of one aircraft merged), then overall per source.
-    let mut per: BTreeMap<(String, String), (Acc, usize)> = BTreeMap::new();
-    for ((source, hex, _id), acc) in accs {
-        let mean_err = acc.h_err.iter().sum::<f64>() / acc.h_err.len().max(1) as f64;
-        let e = per.entry((source, hex)).or_default();
-        e.1 += (mean_err > FALSE_TRACK_M) as usize;
-        e.0.times.extend(acc.times);
-        e.0.h_err.extend(acc.h_err);
-        e.0.v_err.extend(acc.v_err);
-        e.0.nees.extend(acc.nees);
-        e.0.crb.extend(acc.crb);
-    }
-    let make_row = |source: &str,
-                    hex: &str,
-                    aircraft: usize,
-                    acc: &Acc,
-                    (cont, cont_1km): (f64, f64),
-                    breaks: usize,
-                    false_tracks| Row {
+    Ok(Records { accs, unknown, latest_receiver })
+}
+
+/// One row of the report from its accumulated errors.
+fn row(
+    source: &str,
+    hex: &str,
+    aircraft: usize,
+    acc: &Acc,
+    (cont, cont_1km): (f64, f64),
+    breaks: usize,
+    false_tracks: usize,
+) -> Row {
+    Row {
         source: source.to_string(),
         hex: hex.to_string(),
         aircraft,
@@ -443,54 +477,38 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
         crb_m: (!acc.crb.is_empty()).then(|| (acc.crb.iter().sum::<f64>() / acc.crb.len() as f64).sqrt()),
         crb_ratio: (!acc.crb.is_empty() && acc.crb.len() == acc.h_err.len())
             .then(|| rms(&acc.h_err) / (acc.crb.iter().sum::<f64>() / acc.crb.len() as f64).sqrt()),
-    };
-    // Before `coverage` sorts the times apart from their errors.
-    let fusion = compare_fusion(&per);
-    let mut aircraft_rows = Vec::new();
-    let mut overall: BTreeMap<String, Pooled> = BTreeMap::new();
-    for ((source, hex), (mut acc, false_tracks)) in per {
-        acc.batches = minute_batches(&acc.nees);
-        let span = truth.span(&hex).unwrap_or((0.0, 0.0));
-        let mut near: Vec<f64> =
-            acc.times.iter().zip(&acc.h_err).filter(|&(_, &e)| e <= 1000.0).map(|(&t, _)| t).collect();
-        let (cont_1km, _) = coverage(&mut near, span);
-        let (cont, breaks) = coverage(&mut acc.times, span);
-        aircraft_rows.push(make_row(&source, &hex, 1, &acc, (cont, cont_1km), breaks, false_tracks));
-        // The tracks of aircraft without ADS-B also in a row of their own:
-        // what multilateration and Mode S alone give.
-        let mode_s_only = matches!(source.as_str(), "fused" | "mlat") && truth.adsb.get(&hex) == Some(&false);
-        let rows = [Some(source.clone()), mode_s_only.then(|| format!("{source}:mode-s-only"))];
-        for key in rows.into_iter().flatten() {
-            let o = overall.entry(key).or_default();
-            o.acc.h_err.extend(&acc.h_err);
-            o.acc.v_err.extend(&acc.v_err);
-            o.acc.nees.extend(&acc.nees);
-            o.acc.crb.extend(&acc.crb);
-            o.acc.batches.extend(&acc.batches);
-            o.aircraft += 1;
-            o.cont += cont;
-            o.cont_1km += cont_1km;
-            o.breaks += breaks;
-            o.false_tracks += false_tracks;
+    }
+}
+
+impl Acc {
+    /// One record's errors against the truth point `tp` at `t`, `e` its
+    /// east/north offset (m); with the scenario's geometry, an MLAT fix's
+    /// Cramér-Rao bound.
+    fn add(&mut self, v: &Value, tp: &TruthPoint, t: f64, e: [f64; 2], geometry: Option<&Geometry>) {
+        self.times.push(t);
+        self.h_err.push(e[0].hypot(e[1]));
+        if let Some(alt) = v["alt_m"].as_f64() {
+            self.v_err.push(alt - tp.alt);
+        }
+        if let (Some(g), Some(ids)) = (geometry, v["receivers"].as_array()) {
+            let (pos, sig): (Vec<[f64; 3]>, Vec<f64>) =
+                ids.iter().filter_map(|id| g.receivers.get(id.as_str()?)).copied().unzip();
+            let alt = v["altitude_used"].as_bool().unwrap_or(false).then_some(g.alt_sigma_m);
+            let truth_ecef = fuse1090_core::geo::geodetic_to_ecef(tp.lat, tp.lon, tp.alt);
+            if let Some(c) = fuse1090_core::mlat::solver::crb_en(&pos, &sig, alt, truth_ecef) {
+                self.crb.push(c[0][0] + c[1][1]);
+            }
+        }
+        if let Some(c) = v["cov_en"].as_array() {
+            let g = |r: usize, k: usize| c.get(r).and_then(|x| x.get(k)).and_then(Value::as_f64);
+            if let (Some(a), Some(b), Some(cc), Some(d)) = (g(0, 0), g(0, 1), g(1, 0), g(1, 1)) {
+                let det = a * d - b * cc;
+                if det > 0.0 {
+                    self.nees.push((t, (d * e[0] * e[0] - (b + cc) * e[0] * e[1] + a * e[1] * e[1]) / det));
+                }
+            }
         }
     }
-    let overall = overall
-        .into_iter()
-        .map(|(source, o)| {
-            let n = o.aircraft as f64;
-            make_row(
-                &source,
-                "all",
-                o.aircraft,
-                &o.acc,
-                (o.cont / n, o.cont_1km / n),
-                o.breaks,
-                o.false_tracks,
-            )
-        })
-        .collect();
-    let receivers = receivers::compare(&truth.receivers, &latest_receiver);
-    Ok(Report { overall, aircraft: aircraft_rows, unknown_records: unknown, fusion, receivers })
 }
 
 fn fmt_opt(v: Option<f64>, prec: usize) -> String {

@@ -29,7 +29,7 @@ use fuse1090_core::feed::RawFrame;
 use fuse1090_core::geo::{displace, ecef_distance, geodetic_to_ecef};
 use scenario::{Aircraft, Receiver, Scenario, Segment, StartState};
 use trajectory::{Trajectory, STEP_S};
-use transmit::Transmitter;
+use transmit::{Transmission, Transmitter};
 
 /// Speed of light in air near the ground (refractive index 1.0003).
 pub const C_AIR: f64 = 299_792_458.0 / 1.0003;
@@ -231,7 +231,7 @@ pub fn oracle_config(s: &Scenario) -> String {
 }
 
 /// Runs the scenario, writing the capture and the truth.
-pub fn simulate(s: &Scenario, capture: impl Write, mut truth: impl Write) -> Result<SimStats> {
+pub fn simulate(s: &Scenario, capture: impl Write, truth: impl Write) -> Result<SimStats> {
     let receivers = all_receivers(s);
     let aircraft = all_aircraft(s);
     let mut stats = SimStats { receivers: receivers.len(), aircraft: aircraft.len(), ..Default::default() };
@@ -239,30 +239,10 @@ pub fn simulate(s: &Scenario, capture: impl Write, mut truth: impl Write) -> Res
     let mut cap = CaptureWriter::new(capture, &format!("fuse1090 sim, seed {}", s.seed))?;
     let mut rxs = Vec::with_capacity(receivers.len());
     for (i, r) in receivers.iter().enumerate() {
-        let mut g = rng(s.seed, 10_000 + i as u64);
-        let clock = ClockModel::new(r, s.start_unix, s.duration_s, &mut g);
-        let mut bursts = Vec::new();
-        if r.burst_per_min > 0.0 {
-            let mut t = 0.0;
-            loop {
-                t += -(1.0 - g.gen::<f64>()).ln() * 60.0 / r.burst_per_min;
-                if t > s.duration_s {
-                    break;
-                }
-                bursts.push((t, t + r.burst_s));
-            }
-        }
+        let rx = RxSim::new(s, i, r);
         let (dlat, dlon, dalt) = displace(r.lat, r.lon, r.alt_m, r.position_error_m);
         cap.receiver(&ReceiverDecl { id: r.id.clone(), lat: dlat, lon: dlon, alt: dalt, clock: r.clock })?;
-        rxs.push(RxSim {
-            spec: r.clone(),
-            ecef: geodetic_to_ecef(r.lat, r.lon, r.alt_m),
-            clock,
-            delay: Normal::new(r.delay_ms * 1e-3, r.delay_spread_ms * 1e-3).expect("finite"),
-            bursts,
-            last_arrival: f64::NEG_INFINITY,
-            rng: g,
-        });
+        rxs.push(rx);
     }
 
     let trajectories: Vec<Trajectory> = aircraft
@@ -307,38 +287,12 @@ pub fn simulate(s: &Scenario, capture: impl Write, mut truth: impl Write) -> Res
         if let Some(x) = tx.emit(&trajectories[i]) {
             stats.transmissions += 1;
             let p = x.true_pos;
-            let pe = geodetic_to_ecef(p.lat, p.lon, p.alt_m);
+            let from = geodetic_to_ecef(p.lat, p.lon, p.alt_m);
             for (ri, rx) in rxs.iter_mut().enumerate() {
-                let d = ecef_distance(pe, rx.ecef);
-                if d > rx.spec.range_km * 1000.0 || d > radio_horizon_m(p.alt_m, rx.spec.alt_m) {
-                    continue;
+                if let Some((arrival, frame)) = rx.receive(&x, from, &mut stats) {
+                    seq += 1;
+                    pending.push(Reverse((ns(arrival), seq, ri, frame)));
                 }
-                if rx.spec.loss > 0.0 && rx.rng.gen::<f64>() < rx.spec.loss {
-                    continue;
-                }
-                let toa = x.t + d / C_AIR;
-                // Drawn only for a receiver with multipath, so that every
-                // other receiver's random stream is as it was.
-                let late = rx.spec.multipath_prob > 0.0 && rx.rng.gen::<f64>() < rx.spec.multipath_prob;
-                let reflected = if late {
-                    -(1.0 - rx.rng.gen::<f64>()).ln() * rx.spec.multipath_delay_ns * 1e-9
-                } else {
-                    0.0
-                };
-                let ts = rx.clock.timestamp(toa + rx.spec.bias_ns * 1e-9 + reflected, &mut rx.rng);
-                stats.multipath += late as u64;
-                let mut delay = rx.delay.sample(&mut rx.rng).max(2e-4);
-                if rx.bursts.iter().any(|&(a, b)| a <= toa && toa < b) {
-                    delay += rx.spec.burst_ms * 1e-3;
-                }
-                // One TCP stream per receiver: frames arrive in the order sent.
-                let arrival = (toa + delay).max(rx.last_arrival);
-                rx.last_arrival = arrival;
-                let signal = (255.0 - 40.0 * (d / 1000.0 + 1.0).log10()).clamp(1.0, 255.0) as u8;
-                let frame = RawFrame::new(&x.bytes[..x.len], ts, signal).expect("valid length");
-                seq += 1;
-                pending.push(Reverse((ns(arrival), seq, ri, frame)));
-                stats.receptions += 1;
             }
         }
         let next = tx.next_time();
@@ -349,10 +303,85 @@ pub fn simulate(s: &Scenario, capture: impl Write, mut truth: impl Write) -> Res
     }
     write_until(&mut pending, &mut cap, i64::MAX)?;
     cap.into_inner().flush()?;
+    stats.truth_lines = write_truth(s, &receivers, &aircraft, &trajectories, truth)?;
+    Ok(stats)
+}
 
-    // Truth: each receiver's true timing and position error, who is who,
-    // then where everyone was every 0.1 s.
-    for r in &receivers {
+impl RxSim {
+    /// Receiver `i` of the scenario: its clock, network delay and delay
+    /// bursts drawn from its own random stream.
+    fn new(s: &Scenario, i: usize, r: &Receiver) -> RxSim {
+        let mut g = rng(s.seed, 10_000 + i as u64);
+        let clock = ClockModel::new(r, s.start_unix, s.duration_s, &mut g);
+        let mut bursts = Vec::new();
+        if r.burst_per_min > 0.0 {
+            let mut t = 0.0;
+            loop {
+                t += -(1.0 - g.gen::<f64>()).ln() * 60.0 / r.burst_per_min;
+                if t > s.duration_s {
+                    break;
+                }
+                bursts.push((t, t + r.burst_s));
+            }
+        }
+        RxSim {
+            spec: r.clone(),
+            ecef: geodetic_to_ecef(r.lat, r.lon, r.alt_m),
+            clock,
+            delay: Normal::new(r.delay_ms * 1e-3, r.delay_spread_ms * 1e-3).expect("finite"),
+            bursts,
+            last_arrival: f64::NEG_INFINITY,
+            rng: g,
+        }
+    }
+
+    /// This receiver's copy of a transmission sent from `from` (ECEF): when
+    /// it reaches the server (scenario time) and the frame with the
+    /// receiver's timestamp; `None` when out of range, below the horizon,
+    /// or lost.
+    fn receive(&mut self, x: &Transmission, from: [f64; 3], stats: &mut SimStats) -> Option<(f64, RawFrame)> {
+        let d = ecef_distance(from, self.ecef);
+        if d > self.spec.range_km * 1000.0 || d > radio_horizon_m(x.true_pos.alt_m, self.spec.alt_m) {
+            return None;
+        }
+        if self.spec.loss > 0.0 && self.rng.gen::<f64>() < self.spec.loss {
+            return None;
+        }
+        let toa = x.t + d / C_AIR;
+        // Drawn only for a receiver with multipath, so that every
+        // other receiver's random stream is as it was.
+        let late = self.spec.multipath_prob > 0.0 && self.rng.gen::<f64>() < self.spec.multipath_prob;
+        let reflected = if late {
+            -(1.0 - self.rng.gen::<f64>()).ln() * self.spec.multipath_delay_ns * 1e-9
+        } else {
+            0.0
+        };
+        let ts = self.clock.timestamp(toa + self.spec.bias_ns * 1e-9 + reflected, &mut self.rng);
+        stats.multipath += late as u64;
+        let mut delay = self.delay.sample(&mut self.rng).max(2e-4);
+        if self.bursts.iter().any(|&(a, b)| a <= toa && toa < b) {
+            delay += self.spec.burst_ms * 1e-3;
+        }
+        // One TCP stream per receiver: frames arrive in the order sent.
+        let arrival = (toa + delay).max(self.last_arrival);
+        self.last_arrival = arrival;
+        let signal = (255.0 - 40.0 * (d / 1000.0 + 1.0).log10()).clamp(1.0, 255.0) as u8;
+        let frame = RawFrame::new(&x.bytes[..x.len], ts, signal).expect("valid length");
+        stats.receptions += 1;
+        Some((arrival, frame))
+    }
+}
+
+/// The truth file: each receiver's true timing and position error, who is
+/// who, then where everyone was every 0.1 s. Returns the truth lines written.
+fn write_truth(
+    s: &Scenario,
+    receivers: &[Receiver],
+    aircraft: &[Aircraft],
+    trajectories: &[Trajectory],
+    mut truth: impl Write,
+) -> Result<u64> {
+    for r in receivers {
         let e = r.position_error_m;
         writeln!(
             truth,
@@ -369,7 +398,7 @@ pub fn simulate(s: &Scenario, capture: impl Write, mut truth: impl Write) -> Res
             0.0 - e[1]
         )?;
     }
-    for a in &aircraft {
+    for a in aircraft {
         writeln!(
             truth,
             "{{\"type\":\"equipage\",\"hex\":\"{:06X}\",\"adsb\":{},\"nac_p\":{}}}",
@@ -379,10 +408,11 @@ pub fn simulate(s: &Scenario, capture: impl Write, mut truth: impl Write) -> Res
             writeln!(truth, "{{\"type\":\"spoof\",\"hex\":\"{:06X}\"}}", a.hex)?;
         }
     }
+    let mut lines = 0;
     let steps = (s.duration_s / STEP_S).round() as usize;
     for k in 0..=steps {
         let t = k as f64 * STEP_S;
-        for (a, tr) in aircraft.iter().zip(&trajectories) {
+        for (a, tr) in aircraft.iter().zip(trajectories) {
             let Some(p) =
                 tr.samples.get(((t - tr.t0) / STEP_S).round() as usize).filter(|_| t >= tr.t0 - 1e-9)
             else {
@@ -401,9 +431,9 @@ pub fn simulate(s: &Scenario, capture: impl Write, mut truth: impl Write) -> Res
                 p.vel[1],
                 p.vel[2]
             )?;
-            stats.truth_lines += 1;
+            lines += 1;
         }
     }
     truth.flush()?;
-    Ok(stats)
+    Ok(lines)
 }
