@@ -66,7 +66,7 @@ fn bench(c: &mut Criterion) {
             for r in &records {
                 match r {
                     CaptureRecord::Receiver(d) => {
-                        front.add_receiver(d.clone(), &mut cmds);
+                        front.add_receiver(d.clone());
                     }
                     CaptureRecord::Frame(f) => front.on_frame(f.rx, f.arrival, &f.frame, &mut cmds),
                 }

@@ -10,7 +10,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 
 use crate::config::Config;
-use crate::core::{Back, Cmd, Core, Event, Front};
+use crate::core::{Back, Cmd, Core, Event, Front, ReceiverNames};
 use crate::feed::capture::{CaptureReader, CaptureRecord};
 use crate::publish::json::write_event;
 
@@ -172,7 +172,8 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
     let (mut front, back) = Core::stages(&core_cfg);
     front.know(cfg.receiver.iter().map(|r| r.known()).collect());
     let (cmd_tx, cmd_rx) = std::sync::mpsc::sync_channel::<Batch>(8);
-    let writer = named_thread("core-back", move || write_back(back, cmd_rx, out_file))?;
+    let names = front.receiver_names();
+    let writer = named_thread("core-back", move || write_back(back, names, cmd_rx, out_file))?;
     let (mut first, mut last) = (f64::INFINITY, f64::NEG_INFINITY);
     let mut cmds = Vec::new();
     for batch in rx {
@@ -219,6 +220,7 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
 /// back's written here between them). Returns the stage, for its counters.
 fn write_back(
     mut back: Back,
+    names: ReceiverNames,
     batches: std::sync::mpsc::Receiver<Batch>,
     out_file: File,
 ) -> (Back, Result<()>) {
@@ -227,6 +229,7 @@ fn write_back(
     let write = || -> Result<()> {
         for batch in batches {
             back.apply(batch.cmds, &mut events);
+            let names = names.read();
             // The front's own events come in the order of their commands,
             // already written out; the back's are written here between them.
             let mut ends = batch.ends.iter();
@@ -239,7 +242,7 @@ fn write_back(
                     out.write_all(text)
                 } else {
                     line.clear();
-                    write_event(&mut line, &ev, |i| back.receiver_id(i));
+                    write_event(&mut line, &ev, |i| names.get(i));
                     out.write_all(&line)
                 };
                 written.context("writing output")?;

@@ -28,7 +28,7 @@ use super::outputs::{self, FrameForward, Outputs};
 use super::record::Recorder;
 use super::{report, unix_now, web, ToCore, BATCH};
 use crate::core::front::KnownReceiver;
-use crate::core::{Back, Cmd, Core, CoreConfig, Event, Front};
+use crate::core::{Back, Cmd, Core, CoreConfig, Event, Front, ReceiverNames};
 
 /// A time (Unix s) one thread leaves for another: the tracker's next
 /// deadline, for the front thread's sleep.
@@ -96,6 +96,7 @@ pub(super) fn start(cfg: &CoreConfig, setup: Setup, rx: Receiver<ToCore>) -> std
     };
     front.take_up(receivers);
     let back = BackThread {
+        names: front.front.receiver_names(),
         back,
         outputs,
         registry,
@@ -144,7 +145,7 @@ impl FrontThread {
             if let Some(r) = &mut self.recorder {
                 r.receiver(&decl, unix_now());
             }
-            self.front.add_receiver(decl, &mut self.cmds);
+            self.front.add_receiver(decl);
         }
         let Some(path) = &self.state_file else { return };
         match crate::mlat::state::LearntState::load(path) {
@@ -229,7 +230,7 @@ impl FrontThread {
                     if let Some(w) = &mut self.recorder {
                         w.receiver(&d, unix_now());
                     }
-                    self.front.add_receiver(d, &mut self.cmds);
+                    self.front.add_receiver(d);
                 }
                 ToCore::Outputs(o) => {
                     self.forward = o.frame_forward();
@@ -315,6 +316,8 @@ impl FrontThread {
 /// outputs (with the front's events, in order), stats and metrics.
 struct BackThread {
     back: Back,
+    /// The receivers' ids, the front's table, to name them in events.
+    names: ReceiverNames,
     outputs: Outputs,
     registry: Arc<Registry>,
     web: Option<web::WebPublisher>,
@@ -346,8 +349,9 @@ impl BackThread {
             };
             self.back.apply(cmds, &mut events);
             self.due.set(self.back.poll_timeout());
-            let back = &self.back;
-            self.outputs.publish(&events, |i| back.receiver_id(i), now);
+            let names = self.names.read();
+            self.outputs.publish(&events, |i| names.get(i), now);
+            drop(names);
             if let Some(w) = &mut self.web {
                 w.observe(&events, now);
                 w.maybe_render(now, self.front.stats.messages, &self.registry);

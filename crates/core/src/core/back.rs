@@ -11,8 +11,6 @@ use crate::track::Measurement;
 /// What the front stage asks of the tracker, in the order it must happen.
 #[derive(Clone, Debug)]
 pub enum Cmd {
-    /// A receiver was declared (its id names it in MLAT records).
-    Receiver(String),
     /// An event of the front stage (an ADS-B report, an MLAT fix), passed
     /// through so the output keeps its order.
     Event(Event),
@@ -61,13 +59,12 @@ pub enum Cmd {
 
 pub struct Back {
     fuser: Fuser,
-    receiver_ids: Vec<String>,
     outputs: Vec<Output>,
 }
 
 impl Back {
     pub fn new(fuser: Fuser) -> Back {
-        Back { fuser, receiver_ids: Vec::new(), outputs: Vec::new() }
+        Back { fuser, outputs: Vec::new() }
     }
 
     pub fn fuser(&self) -> &Fuser {
@@ -76,11 +73,6 @@ impl Back {
 
     pub fn fuser_mut(&mut self) -> &mut Fuser {
         &mut self.fuser
-    }
-
-    /// The id of receiver `rx`, for the records that name it.
-    pub fn receiver_id(&self, rx: usize) -> &str {
-        self.receiver_ids.get(rx).map_or("?", String::as_str)
     }
 
     /// When the tracker next has work of its own (a held publication, the
@@ -94,7 +86,6 @@ impl Back {
         for cmd in cmds {
             let o = &mut self.outputs;
             match cmd {
-                Cmd::Receiver(id) => self.receiver_ids.push(id),
                 Cmd::Event(e) => out.extend(Some(e)),
                 Cmd::Measure { addr, nac_p, m, now } => self.fuser.on_measurement(addr, nac_p, m, now, o),
                 Cmd::Tdoa { g, now } => self.fuser.on_tdoa(&g, now, o),

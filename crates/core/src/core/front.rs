@@ -18,6 +18,7 @@ use super::back::Cmd;
 use super::delay::DelayCal;
 use super::lateness::Lateness;
 use super::{CoreConfig, CoreStats, Dating, Event, PositionReport};
+use super::ReceiverNames;
 use crate::feed::capture::{CaptureRecord, ClockKind, ReceiverDecl};
 use crate::feed::RawFrame;
 use crate::fuse::conformance::{ConformanceConfig, Monitor};
@@ -101,6 +102,8 @@ pub struct Front {
     /// position and clock, and its timing when given) wins over their
     /// declaration in a capture.
     known: Vec<KnownReceiver>,
+    /// The receivers' ids, shared with whoever writes events out.
+    ids: ReceiverNames,
 }
 
 /// The least float above `x` (finite `x`; `f64::next_up` is newer than
@@ -148,6 +151,7 @@ impl Front {
             sync_inflation: cfg.track.mlat_sync_inflation,
             commb_velocity: cfg.track.commb_velocity,
             known: Vec::new(),
+            ids: ReceiverNames::default(),
         }
     }
 
@@ -156,7 +160,7 @@ impl Front {
         self.known = known;
     }
 
-    pub fn add_receiver(&mut self, mut decl: ReceiverDecl, cmds: &mut Vec<Cmd>) -> usize {
+    pub fn add_receiver(&mut self, mut decl: ReceiverDecl) -> usize {
         let known = self.known.iter().find(|k| k.decl.id == decl.id);
         if let Some(k) = known {
             decl = k.decl.clone();
@@ -165,7 +169,7 @@ impl Front {
         if let Some(t) = known.and_then(|k| k.timing.as_ref()) {
             self.mlat.set_known_timing(self.receivers.len(), t);
         }
-        cmds.push(Cmd::Receiver(decl.id.clone()));
+        self.ids.push(&decl.id);
         self.receivers.push(RxState {
             decl,
             frames: 0,
@@ -175,6 +179,12 @@ impl Front {
             late_copies: 0,
         });
         self.receivers.len() - 1
+    }
+
+    /// A handle to the receivers' ids, for naming events on another
+    /// thread (see [`ReceiverNames`]).
+    pub fn receiver_names(&self) -> ReceiverNames {
+        self.ids.clone()
     }
 
     pub fn receiver_id(&self, rx: usize) -> &str {
@@ -310,7 +320,7 @@ impl Front {
     pub fn on_record(&mut self, rec: CaptureRecord, cmds: &mut Vec<Cmd>) {
         match rec {
             CaptureRecord::Receiver(d) => {
-                self.add_receiver(d, cmds);
+                self.add_receiver(d);
             }
             CaptureRecord::Frame(f) => self.on_frame(f.rx, f.arrival, &f.frame, cmds),
         }

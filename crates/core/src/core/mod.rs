@@ -21,6 +21,7 @@ pub mod commb;
 pub mod delay;
 pub mod front;
 pub mod lateness;
+pub mod receiver_names;
 
 use std::collections::VecDeque;
 
@@ -28,6 +29,7 @@ use serde::Deserialize;
 
 pub use back::{Back, Cmd};
 pub use front::Front;
+pub use receiver_names::ReceiverNames;
 
 use crate::feed::capture::{CaptureRecord, ReceiverDecl};
 use crate::feed::RawFrame;
@@ -216,7 +218,7 @@ impl Core {
 
     /// A receiver declared; its index names it in frames.
     pub fn handle_receiver(&mut self, decl: ReceiverDecl) -> usize {
-        let rx = self.front.add_receiver(decl, &mut self.cmds);
+        let rx = self.front.add_receiver(decl);
         self.run();
         rx
     }
