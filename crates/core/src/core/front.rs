@@ -30,7 +30,7 @@ use crate::mlat::group::{Added, Group, GroupInfo, Grouper};
 use crate::mlat::timing::KnownTiming;
 use crate::mlat::Mlat;
 use crate::modes::commb::{Inference, Register};
-use crate::modes::nic::{nacp_epu_m, nacv_bounds, nucp_hpl_m, R95_PER_SIGMA};
+use crate::modes::nic::{position_sigma_m, velocity_sigmas_ms};
 use crate::modes::{Body, Decoder, DecoderConfig, Es};
 use crate::track::{Measurement, Observation, Source};
 

@@ -1,6 +1,9 @@
 //! Integrity and accuracy categories: NIC from type code and supplements
 //! (DO-260/A/B, versions 0-2), NUCp for version 0, and the NACp -> EPU table
-//! that turns a reported category into a position error we can filter with.
+//! that turns a reported category into a position error we can filter with:
+//! NACp, NUCp and NACv to the sigmas the tracker uses, in one place.
+
+use crate::geo::FT_TO_M;
 
 /// NIC of an airborne (TC 9-18, 20-22) or surface (TC 5-8) position.
 ///
@@ -90,6 +93,27 @@ pub fn nacv_bounds(nac_v: u8) -> Option<(f64, f64)> {
     })
 }
 
+/// The per-axis 1-sigma horizontal position error (m) a report claims:
+/// its NACp's EPU over [`R95_PER_SIGMA`]; from a version 0 transponder,
+/// which reports NUCp, half the protection limit (about its 95% accuracy
+/// bound) instead. `None` when neither says anything. Every consumer of a
+/// report's accuracy (the tracker, the published records) takes it from here.
+pub fn position_sigma_m(nac_p: Option<u8>, nuc_p: Option<u8>) -> Option<f64> {
+    let epu = match nac_p.filter(|&n| n > 0) {
+        Some(n) => nacp_epu_m(n),
+        None => nuc_p.and_then(nucp_hpl_m).map(|h| h / 2.0),
+    };
+    epu.map(|e| e / R95_PER_SIGMA)
+}
+
+/// NACv's bounds as 1-sigma errors (m/s): horizontal velocity per axis (its
+/// bound a 2-D 95% radius) and vertical rate (a 1-D 95% bound). A NACv of
+/// 0 (unknown) or out of range takes the `unknown` bounds (m/s, ft/s).
+pub fn velocity_sigmas_ms(nac_v: u8, unknown: (f64, f64)) -> (f64, f64) {
+    let (h95, v95_fps) = nacv_bounds(nac_v).unwrap_or(unknown);
+    (h95 / R95_PER_SIGMA, v95_fps * FT_TO_M / 1.96)
+}
+
 /// Estimated position uncertainty (95% horizontal radius, metres) of a NACp;
 /// `None` for 0 (unknown) and out-of-range values.
 pub fn nacp_epu_m(nac_p: u8) -> Option<f64> {
@@ -147,5 +171,20 @@ mod tests {
         // DO-260B: NACv 2 is 3 m/s horizontal and 15 ft/s vertical (95%).
         assert_eq!(nacv_bounds(2), Some((3.0, 15.0)));
         assert_eq!((nacv_bounds(0), nacv_bounds(5)), (None, None));
+    }
+
+    #[test]
+    fn categories_become_sigmas_a_95_percent_bound_being_about_two_of_them() {
+        // NACp 9: EPU 30 m, a 2-D 95% radius, so 12.25 m per axis.
+        let s = position_sigma_m(Some(9), None).unwrap();
+        assert!((s - 12.25).abs() < 0.01, "{s}");
+        // Version 0: half NUCp 7's 0.1 NM protection limit as the 95% bound.
+        let s0 = position_sigma_m(None, Some(7)).unwrap();
+        assert!((s0 - 0.05 * 1852.0 / 2.448).abs() < 1e-9, "{s0}");
+        assert_eq!(position_sigma_m(Some(0), None), None);
+        // NACv 2: 3 m/s horizontal (2-D) and 15 ft/s vertical (1-D) at 95%.
+        let (h, v) = velocity_sigmas_ms(2, (30.0, 100.0));
+        assert!((h - 3.0 / 2.448).abs() < 1e-12 && (v - 15.0 * 0.3048 / 1.96).abs() < 1e-12, "{h} {v}");
+        assert_eq!(velocity_sigmas_ms(0, (30.0, 100.0)).0, 30.0 / 2.448);
     }
 }

@@ -96,15 +96,13 @@ impl Front {
                     let (Some(ve), Some(vn), Some((t_frame, _))) = (v.ve_kt, v.vn_kt, timing) else {
                         return;
                     };
-                    // NACv: 95% bounds of horizontal (m/s) and vertical (ft/s) velocity error.
-                    // Unknown: wider than NACv 1's bounds.
-                    let (h95, v95_fps) = nacv_bounds(v.nac_v).unwrap_or((30.0, 100.0));
+                    // NACv's sigmas; unknown: wider than NACv 1's bounds.
+                    let (h_sigma, v_sigma) = velocity_sigmas_ms(v.nac_v, (30.0, 100.0));
                     // Plus the 1 kt (or 4 kt supersonic) and 64 ft/min resolution.
                     let step = if v.subtype == 2 { 4.0 } else { 1.0 } * KT_TO_MS;
-                    let hv = (h95 / R95_PER_SIGMA).powi(2) + step * step / 12.0;
+                    let hv = h_sigma.powi(2) + step * step / 12.0;
                     let climb = v.vrate_fpm.map(|r| {
-                        let s = v95_fps * FT_TO_M / 1.96;
-                        (r as f64 * FT_TO_M / 60.0, s * s + (64.0 * FT_TO_M / 60.0).powi(2) / 12.0)
+                        (r as f64 * FT_TO_M / 60.0, v_sigma * v_sigma + (64.0 * FT_TO_M / 60.0).powi(2) / 12.0)
                     });
                     let m = Measurement {
                         t: t_frame,
@@ -148,12 +146,6 @@ impl Front {
             }
             _ => (None, None, None),
         };
-        // EPU is a 95% radius: per-axis sigma = EPU / 2.448. Version 0 reports
-        // NUCp, whose 95% accuracy bound is about half its protection limit.
-        let epu = match d.nac_p.filter(|&n| n > 0) {
-            Some(n) => nacp_epu_m(n),
-            None => d.nuc_p.and_then(nucp_hpl_m).map(|h| h / 2.0),
-        };
         Some(PositionReport {
             addr: d.msg.addr,
             t,
@@ -163,7 +155,7 @@ impl Front {
             alt_baro_ft,
             alt_sigma_m,
             nac_p: d.nac_p,
-            sigma_m: epu.map(|e| e / R95_PER_SIGMA),
+            sigma_m: position_sigma_m(d.nac_p, d.nuc_p),
             dating,
             surface: p.surface,
             rx,
