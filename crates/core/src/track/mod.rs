@@ -15,6 +15,7 @@ pub mod kf;
 pub mod measurement;
 pub mod models;
 pub mod motion;
+pub mod noise;
 pub mod particle;
 pub mod plane;
 #[allow(clippy::module_inception)]

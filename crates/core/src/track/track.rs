@@ -13,17 +13,12 @@
 //! per measurement would cost, paid on every step, for a step or two more
 //! in the rare re-run.
 //!
-//! Why VB: a transponder's NACp is a claim. The noise actually seen is
-//! estimated Särkkä-Nummenmaa style, as an inverse-gamma scale on the
-//! nominal covariance, updated after each update from its residual, with
-//! forgetting; a source that claims better than it is gets its covariance
-//! scaled up and the track stays consistent. Gated measurements still teach
-//! the scale (from the innovation), else an over-claiming source would be
-//! gated forever; but only once a restart has shown it is the noise and not
-//! the track that is wrong, and no more than an innovation on the gate.
-//! Taught at once and in full, a track started on one wild MLAT fix let the
-//! honest fixes after it open the gate by raising the scale, and crawled
-//! back over minutes (tma-busy's MLAT tracks: 570 m RMS, 74 m now).
+//! Why VB: a transponder's NACp is a claim. Each source's noise scale is
+//! learnt from the track's residuals (`noise.rs`, with why gated
+//! measurements teach it only once a restart has shown the noise, not the
+//! track, was wrong: taught at once and in full, a track started on one
+//! wild MLAT fix let the honest fixes after it open the gate by raising the
+//! scale, and crawled back over minutes).
 //!
 //! Beside it: what a track is given (`measurement.rs`) and what it gives
 //! (`estimate.rs`); its tests are in `track_tests.rs`. Within it: the
@@ -44,28 +39,12 @@ use super::gate::Gate;
 use super::imm::{Imm, ImmSpec};
 use super::kf::{self, Gaussian, Linear};
 pub use super::measurement::{Measurement, Observation, Outcome, Source};
+use super::noise::Noise;
 use super::plane::Plane;
 
 mod position;
 mod vertical;
 pub use vertical::Vertical;
-
-/// Inverse-gamma scale of a source's nominal measurement covariance.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Vb {
-    pub alpha: f64,
-    pub beta: f64,
-}
-
-impl Vb {
-    fn prior(weight: f64) -> Vb {
-        Vb { alpha: weight, beta: weight }
-    }
-
-    pub fn scale(&self) -> f64 {
-        self.beta / self.alpha
-    }
-}
 
 /// Everything a measurement changes: copied before each one for re-runs.
 #[derive(Clone, Debug)]
@@ -77,41 +56,14 @@ struct State {
     plane: Option<Plane>,
     imm: Option<Imm>,
     vertical: Option<Vertical>,
-    vb: [Vb; 2],
-    pending: [Pending; 2],
+    /// Each source's noise scale (ADS-B, MLAT).
+    noise: [Noise; 2],
     /// Trace of each source's newest nominal covariance (m^2), and whether
     /// it was the source's own claim.
     nominal: [Option<(f64, bool)>; 2],
-    /// Each source's noise scale when the filter's covariance last matched
-    /// it (see `widen_for_scale`).
-    covered_scale: [f64; 2],
     gated_in_a_row: u32,
     /// Positions accepted since the horizontal filter (re)started.
     accepted_since_start: u32,
-}
-
-/// What gated innovations would teach the VB scale, held back until it is
-/// clear whether the noise or the track was wrong. A track started on a wild
-/// position (an MLAT fix 30 km off on tma-busy) gates every honest position
-/// after it; taught at once, each raised the scale until they passed the gate
-/// and the track crawled back over minutes instead of restarting. Gated
-/// positions that a healthy track outlives are taught (a source claiming too
-/// much is gated often); so are those before a restart that did not cure the
-/// gating; those a restart cured are forgotten.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-struct Pending {
-    alpha: f64,
-    beta: f64,
-    /// Gathered before the newest restart.
-    before_restart: bool,
-}
-
-impl Pending {
-    fn commit(&mut self, vb: &mut Vb) {
-        vb.alpha += self.alpha;
-        vb.beta += self.beta;
-        *self = Pending::default();
-    }
 }
 
 /// `I - K H` of an update: the posterior covariance times the prior's inverse.
@@ -189,7 +141,7 @@ impl Track {
         let gate = Gate::new(cfg.gate_probability);
         // Both sources start from the full prior: a light one let ADS-B's first
         // residuals (the velocity's, before the start-up rule) overshoot.
-        let vb = [Vb::prior(cfg.vb_prior); 2];
+        let noise = [Noise::new(cfg.vb_prior); 2];
         Track {
             specs: smallvec::smallvec![(f64::NEG_INFINITY, spec)],
             gate,
@@ -200,9 +152,7 @@ impl Track {
                 plane: None,
                 imm: None,
                 vertical: None,
-                vb,
-                pending: [Pending::default(); 2],
-                covered_scale: [1.0; 2],
+                noise,
                 nominal: [None; 2],
                 gated_in_a_row: 0,
                 accepted_since_start: 0,
@@ -254,7 +204,7 @@ impl Track {
     }
 
     pub fn vb_scale(&self, source: Source) -> f64 {
-        self.state.vb[source as usize].scale()
+        self.state.noise[source as usize].scale()
     }
 
     /// Ground speed of the current estimate (m/s).
@@ -558,33 +508,6 @@ impl Track {
             v
         });
         Some(Estimate::new(t, plane, g, vertical.map(|v| v.x[0]), vertical.map_or(0.0, |v| v.x[1])))
-    }
-}
-
-/// A noise scale this many times the one the covariance was built with
-/// widens the covariance. At 1.25 the scale's own noise ratcheted it up
-/// (fusion-8seg's fused NEES 1.98 -> 1.85, below its band); at 2 no
-/// benchmark moves.
-const WIDEN_AT_SCALE_RATIO: f64 = 2.0;
-
-/// The filter's position covariance was built from positions weighed with
-/// the scale of their time; once VB finds the noise several times larger,
-/// that covariance is too small by up to the same ratio, and with precise
-/// velocity reports nothing else widens it: the positions' gain stays as
-/// small as the claim made it and the early, believed errors stay in the
-/// estimate. So the position block grows by the ratio (cross terms by its
-/// root: a change of units, it stays positive definite). Smaller rises are
-/// left to the scale's own noise; falls only lower the reference.
-fn widen_for_scale(imm: &mut Imm, scale: f64, covered: &mut f64) {
-    if scale > WIDEN_AT_SCALE_RATIO * *covered {
-        let a = (scale / *covered).sqrt();
-        let t = Matrix6::from_diagonal(&Vector6::new(a, a, 1.0, 1.0, 1.0, 1.0));
-        for f in &mut imm.filters {
-            f.p = t * f.p * t;
-        }
-        *covered = scale;
-    } else if scale < *covered {
-        *covered = scale;
     }
 }
 

@@ -2,29 +2,6 @@
 
 use super::*;
 
-#[test]
-fn a_scale_that_doubles_widens_the_position_block_only() {
-    let cv = crate::track::models::MotionModel::ConstantVelocity { q: 1.0 };
-    let spec = Arc::new(ImmSpec::new(vec![cv], nalgebra::DMatrix::identity(1, 1)));
-    let p = Matrix6::from_fn(|i, j| if i == j { 4.0 } else { 1.0 });
-    let mut imm = Imm::with_spec(spec, Gaussian { x: Vector6::zeros(), p });
-    let mut covered = 10.0;
-    widen_for_scale(&mut imm, 19.0, &mut covered);
-    assert_eq!((imm.filters[0].p, covered), (p, 10.0), "under twice: left to the scale's noise");
-    widen_for_scale(&mut imm, 40.0, &mut covered);
-    let q = imm.filters[0].p;
-    assert_eq!(covered, 40.0);
-    assert_eq!((q[(0, 0)], q[(1, 1)], q[(0, 1)]), (16.0, 16.0, 4.0), "position block x4");
-    assert_eq!((q[(0, 2)], q[(5, 1)]), (2.0, 2.0), "cross terms x2");
-    assert_eq!(q.fixed_view::<4, 4>(2, 2), p.fixed_view::<4, 4>(2, 2), "velocity, acceleration kept");
-    widen_for_scale(&mut imm, 30.0, &mut covered);
-    assert_eq!((imm.filters[0].p, covered), (q, 30.0), "a fall only lowers the reference");
-    widen_for_scale(&mut imm, 59.0, &mut covered);
-    assert_eq!(imm.filters[0].p, q, "twice is measured from the lowered reference");
-    widen_for_scale(&mut imm, 61.0, &mut covered);
-    assert!(imm.filters[0].p[(0, 0)] > 16.0 * 2.0);
-}
-
 fn pos(t: f64, lat: f64, lon: f64, sigma: f64) -> Measurement {
     Measurement {
         t,

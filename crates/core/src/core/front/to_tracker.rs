@@ -102,7 +102,10 @@ impl Front {
                     let step = if v.subtype == 2 { 4.0 } else { 1.0 } * KT_TO_MS;
                     let hv = h_sigma.powi(2) + step * step / 12.0;
                     let climb = v.vrate_fpm.map(|r| {
-                        (r as f64 * FT_TO_M / 60.0, v_sigma * v_sigma + (64.0 * FT_TO_M / 60.0).powi(2) / 12.0)
+                        (
+                            r as f64 * FT_TO_M / 60.0,
+                            v_sigma * v_sigma + (64.0 * FT_TO_M / 60.0).powi(2) / 12.0,
+                        )
                     });
                     let m = Measurement {
                         t: t_frame,

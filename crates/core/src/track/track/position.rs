@@ -34,14 +34,13 @@ impl Track {
         // The report's time error moves it along the velocity.
         let v = pred.x.fixed_rows::<2>(2).into_owned();
         let nominal = cov_en + v * v.transpose() * (time_sigma_s * time_sigma_s);
-        let vb = &mut self.state.vb[source as usize];
+        let noise = &mut self.state.noise[source as usize];
         if self.cfg.vb {
             let (rho, prior) = match source {
                 Source::Adsb => (self.cfg.vb_forgetting_adsb, self.cfg.vb_prior_adsb),
                 Source::Mlat => (self.cfg.vb_forgetting, self.cfg.vb_prior),
             };
-            vb.alpha = rho * vb.alpha + (1.0 - rho) * prior;
-            vb.beta = rho * vb.beta + (1.0 - rho) * prior;
+            noise.forget(rho, prior);
         }
         let Some(nom_inv) = nominal.try_inverse() else {
             return Outcome::Gated;
@@ -50,7 +49,7 @@ impl Track {
         let base = Linear::new(h, z, nominal);
         let linear = |scale: f64| base.with_r(nominal * scale);
         let nis = {
-            let (nu, s) = pred.innovation(&linear(vb.scale()));
+            let (nu, s) = pred.innovation(&linear(noise.scale()));
             Gate::nis(&nu, &s)
         };
         if !self.gate.admits(nis) {
@@ -67,14 +66,10 @@ impl Track {
         }
         self.state.gated_in_a_row = 0;
         self.state.accepted_since_start += 1;
-        let pending = &mut self.state.pending[source as usize];
-        if !pending.before_restart {
-            // Outliers the track outlived: they were the noise's.
-            pending.commit(vb);
-        } else if self.state.accepted_since_start >= self.cfg.max_gated_in_a_row {
-            // The restart cured it: the track was wrong, not the noise.
-            *pending = Pending::default();
-        }
+        // Outliers the track outlived were the noise's; those before a
+        // restart that cured the gating, the track's.
+        let cured = self.state.accepted_since_start >= self.cfg.max_gated_in_a_row;
+        noise.accepted(cured);
         // One variational step per measurement: update with the current noise
         // scale, then the scale's posterior from that update's residual.
         // Iterating the two to a fixed point (up to three updates) changed
@@ -86,17 +81,16 @@ impl Track {
         // so the velocity came later and the residuals grew again (a source
         // claiming 25 m with 100 m errors, 16 in scale, taught 320 within
         // 17 s; with ADS-B's long memory it took a minute to come down).
-        let done = imm.update(&prep, &linear(vb.scale()));
+        let done = imm.update(&prep, &linear(noise.scale()));
         let settled = self.state.accepted_since_start > self.cfg.max_gated_in_a_row;
         if let (Some(step), true, true) = (done, self.cfg.vb, settled) {
             let post = step.estimate;
             let res = z - h * post.x;
             let e = nom_inv * (res * res.transpose() + h * post.p * h.transpose());
-            vb.alpha += 1.0;
-            vb.beta += 0.5 * e.trace();
+            noise.learn(e.trace());
         }
         if self.cfg.vb {
-            widen_for_scale(imm, vb.scale(), &mut self.state.covered_scale[source as usize]);
+            noise.widen(imm);
         }
         match done {
             Some(step) => {
@@ -117,7 +111,7 @@ impl Track {
 
     /// A position the gate left out: what its innovation would teach the
     /// scale (`excess`, with VB) is held back until it is clear the noise and
-    /// not the track is wrong (`Pending`), and too many in a row restart the
+    /// not the track is wrong ([`Noise::gated`]), and too many in a row restart the
     /// track on it (`at`: its position and covariance in the plane).
     pub(super) fn gated(
         &mut self,
@@ -127,23 +121,14 @@ impl Track {
     ) -> Outcome {
         self.state.gated_in_a_row += 1;
         if let Some(excess) = excess {
-            let (pending, vb) =
-                (&mut self.state.pending[source as usize], &mut self.state.vb[source as usize]);
-            if pending.before_restart && self.state.accepted_since_start < self.cfg.max_gated_in_a_row {
-                // The restart did not cure it: the measurements are noisy.
-                pending.commit(vb);
-            }
-            pending.alpha += 1.0;
-            pending.beta += 0.5 * excess;
+            // A restart that did not cure the gating: the measurements are noisy.
+            let uncured = self.state.accepted_since_start < self.cfg.max_gated_in_a_row;
+            self.state.noise[source as usize].gated(excess, uncured);
         }
         if self.state.gated_in_a_row > self.cfg.max_gated_in_a_row {
             self.restarts += 1;
-            for (p, vb) in self.state.pending.iter_mut().zip(&mut self.state.vb) {
-                // Failed twice in a row: not the track's fault.
-                if p.before_restart {
-                    p.commit(vb);
-                }
-                p.before_restart = true;
+            for noise in &mut self.state.noise {
+                noise.restarting();
             }
             let (lat, lon, cov_en) = at;
             self.start(lat, lon, cov_en);
@@ -163,10 +148,7 @@ impl Track {
         let i = source as usize;
         if let Some((old, false)) = self.state.nominal[i] {
             if self.cfg.vb && claimed && old > 0.0 && trace > 0.0 {
-                let k = old / trace;
-                self.state.vb[i].beta *= k;
-                self.state.pending[i].beta *= k;
-                self.state.covered_scale[i] *= k;
+                self.state.noise[i].rebase(old / trace);
             }
         }
         self.state.nominal[i] = Some((trace, claimed));
@@ -184,7 +166,9 @@ impl Track {
         self.state.imm = Some(Imm::with_spec(spec, Gaussian { x: Vector6::zeros(), p }));
         self.state.gated_in_a_row = 0;
         self.state.accepted_since_start = 0;
-        self.state.covered_scale = self.state.vb.map(|vb| vb.scale());
+        for noise in &mut self.state.noise {
+            noise.covered_now();
+        }
     }
 
     /// `x`: the filter's newest combined estimate.
