@@ -49,7 +49,7 @@ use crate::track::imm::ImmSpec;
 use crate::track::motion::{Fix2, Motion, MotionTest};
 use crate::track::particle::SparseTrack;
 use crate::track::plane::Plane;
-use crate::track::{Estimate, Measurement, Observation, Outcome, Source, Stage, Track, TrackConfig};
+use crate::track::{Estimate, Measurement, Observation, Outcome, Source, Track, TrackConfig};
 pub use config::FuseConfig;
 pub use conflict::ConflictConfig;
 pub use conformance::ConformanceConfig;
@@ -501,10 +501,7 @@ impl Fuser {
         let mut seen: Vec<conflict::Seen> = Vec::with_capacity(self.aircraft.len());
         for (&addr, a) in &self.aircraft {
             // Airborne traffic only: surface movements are not TCAS encounters.
-            if a.fused.stage != Stage::Confirmed
-                || now - a.fused.last_position_t > self.tcfg.coast_after_s
-                || a.surface
-            {
+            if !a.fused.confirmed() || now - a.fused.last_position_t > self.tcfg.coast_after_s || a.surface {
                 continue;
             }
             let Some(k) = a.fused.kinematics() else {

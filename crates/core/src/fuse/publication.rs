@@ -22,7 +22,7 @@ impl Fuser {
         let sources = [Source::Adsb, Source::Mlat].into_iter().filter(|&s| age(s) <= window).collect();
         // A coasting single-source track (no position lately) is not fused.
         let coast = self.tcfg.coast_after_s;
-        let confirmed = |s: Source| a.single[s as usize].stage == Stage::Confirmed;
+        let confirmed = |s: Source| a.single[s as usize].confirmed();
         let taken = std::mem::take(&mut a.taken);
         // Asked now, a track answers as it did at `t` from its history, or
         // nothing once its history no longer reaches back that far.

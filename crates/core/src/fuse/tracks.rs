@@ -71,7 +71,7 @@ impl Fuser {
                 Self::motion(a, lat, lon, cov_en);
             }
         }
-        if !matches!(outcome, Outcome::Applied { .. }) || a.fused.stage != Stage::Confirmed {
+        if !matches!(outcome, Outcome::Applied { .. }) || !a.fused.confirmed() {
             return;
         }
         // Due already in this batch: it goes out at its newest measurement

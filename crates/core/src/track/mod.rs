@@ -12,6 +12,7 @@ pub mod estimate;
 pub mod gate;
 pub mod imm;
 pub mod kf;
+pub mod lifecycle;
 pub mod measurement;
 pub mod models;
 pub mod motion;

@@ -38,6 +38,8 @@ pub use super::estimate::{transfer, Estimate, Kinematics};
 use super::gate::Gate;
 use super::imm::{Imm, ImmSpec};
 use super::kf::{self, Gaussian, Linear};
+use super::lifecycle::Lifecycle;
+pub use super::lifecycle::Stage;
 pub use super::measurement::{Measurement, Observation, Outcome, Source};
 use super::noise::Noise;
 use super::plane::Plane;
@@ -69,13 +71,6 @@ struct State {
 /// `I - K H` of an update: the posterior covariance times the prior's inverse.
 fn gain(prior: &Gaussian, post: &Gaussian) -> Option<Matrix6<f64>> {
     Some(post.p * prior.p.cholesky()?.inverse())
-}
-
-/// Lifecycle stage.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Stage {
-    Tentative,
-    Confirmed,
 }
 
 /// Height variance (m^2) from which a height is taken to carry a persistent offset.
@@ -123,10 +118,7 @@ pub struct Track {
     /// allocation and one free for every fourth measurement were 3% of the
     /// tracking stage.
     spare: Option<Box<State>>,
-    /// Recent position outcomes, newest in bit 0 (1 = accepted).
-    hits: u32,
-    seen: u32,
-    pub stage: Stage,
+    lifecycle: Lifecycle,
     /// Time of the newest accepted position (Unix s).
     pub last_position_t: f64,
     pub restarts: u64,
@@ -160,9 +152,7 @@ impl Track {
             cfg,
             history: VecDeque::new(),
             spare: None,
-            hits: 0,
-            seen: 0,
-            stage: Stage::Tentative,
+            lifecycle: Lifecycle::default(),
             last_position_t: f64::NEG_INFINITY,
             restarts: 0,
             keep_gain: false,
@@ -293,9 +283,7 @@ impl Track {
             state: self.history[j].1.as_deref().expect("found with a copy").clone(),
             history: VecDeque::new(),
             spare: None,
-            hits: 0,
-            seen: 0,
-            stage: self.stage,
+            lifecycle: self.lifecycle.stage_only(),
             last_position_t: self.last_position_t,
             restarts: 0,
             keep_gain: false,
@@ -308,16 +296,20 @@ impl Track {
     }
 
     fn record_hit(&mut self, hit: bool, t: f64) {
-        self.hits = (self.hits << 1) | hit as u32;
-        self.seen = (self.seen + 1).min(32);
         if hit {
             self.last_position_t = self.last_position_t.max(t);
         }
-        let window = self.cfg.confirm_n.min(self.seen);
-        let mask = if window >= 32 { u32::MAX } else { (1u32 << window) - 1 };
-        if (self.hits & mask).count_ones() >= self.cfg.confirm_m {
-            self.stage = Stage::Confirmed;
-        }
+        self.lifecycle.record(hit, self.cfg.confirm_m, self.cfg.confirm_n);
+    }
+
+    /// Where the track is in its lifecycle.
+    pub fn stage(&self) -> Stage {
+        self.lifecycle.stage()
+    }
+
+    /// Published, fused and watched for conflicts only once confirmed.
+    pub fn confirmed(&self) -> bool {
+        self.lifecycle.confirmed()
     }
 
     fn apply_one(&mut self, m: &Measurement) -> Outcome {

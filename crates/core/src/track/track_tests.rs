@@ -99,7 +99,7 @@ fn late_measurements_give_the_same_track_as_in_order() {
     let (lat, lon) = truth(19.5);
     assert!(crate::geo::distance_m(lat, lon, ea.lat, ea.lon) < 15.0);
     assert!((ea.vel_enu[0] - 200.0).abs() < 5.0 && ea.vel_enu[1].abs() < 5.0, "{:?}", ea.vel_enu);
-    assert_eq!(a.stage, Stage::Confirmed);
+    assert_eq!(a.stage(), Stage::Confirmed);
     // Older than the window: refused, not misapplied.
     assert_eq!(b.apply(pos(1.0, 45.0, 5.0, 10.0)), Outcome::TooLate);
 }
