@@ -20,6 +20,7 @@ pub mod inputs;
 pub mod loglimit;
 pub mod map_assets;
 pub mod outputs;
+mod readings;
 pub mod record;
 pub mod registry;
 pub mod replay;

@@ -2,12 +2,8 @@
 //! log and the Prometheus metrics, from the front stage's counters (sent
 //! with each batch), the back stage's and the inputs' registry.
 
-use std::sync::atomic::Ordering;
-
-use super::outputs::Outputs;
 use super::record::RecordStats;
-use super::registry::Registry;
-use crate::core::{AircraftHeld, Back, CoreStats, Front};
+use crate::core::{AircraftHeld, CoreStats, Front};
 
 /// The front stage's counters, sent with each batch for the stats line and
 /// the metrics, which the back thread writes (it knows the tracks).
@@ -15,7 +11,6 @@ use crate::core::{AircraftHeld, Back, CoreStats, Front};
 pub(super) struct FrontSnapshot {
     pub stats: CoreStats,
     pub aircraft: u64,
-    pub mlat_fixes: u64,
     pub self_synced_fixes: u64,
     pub dispatched: u64,
     /// The front's per-aircraft tables' sizes (the tracker's is the back's).
@@ -103,135 +98,4 @@ fn delay_metrics(front: &Front, announced: &mut std::collections::HashSet<String
             );
         }
     }
-}
-
-/// The log's stats line; `(fixes, span_s)`: the fixes made since the last
-/// one and the time since.
-pub(super) fn stats_line(
-    front: &FrontSnapshot,
-    back: &Back,
-    reg: &Registry,
-    outputs: &Outputs,
-    recent: (u64, f64),
-) {
-    let s = &front.stats;
-    let f = back.fuser().stats();
-    let per_rx: Vec<String> = reg
-        .receivers
-        .read()
-        .expect("registry")
-        .iter()
-        .map(|(r, c)| {
-            format!(
-                "{}={}/{}err/{}drop/{}thr/{}share",
-                r.id,
-                c.frames.load(Ordering::Relaxed),
-                c.input_errors.load(Ordering::Relaxed),
-                c.queue_drops.load(Ordering::Relaxed),
-                c.throttled.load(Ordering::Relaxed),
-                c.over_share.load(Ordering::Relaxed)
-            )
-        })
-        .collect();
-    let out_err: u64 = outputs.dests.iter().map(|d| d.errors()).sum();
-    let out_dropped: u64 = outputs.dests.iter().map(|d| d.dropped()).sum();
-    tracing::info!(
-        "stats: frames {} [{}], messages {}, aircraft {}, tracks {}, fixes {} ({:.1}/s), suspects {}, conflicts {}, \
-         rejected measurements {}, fusion fallbacks {}, unknown senders {}, socket errors {}, queue drops {}, \
-         kernel drops {}, output errors {}, output drops {}, mlat {} (self-synchronised {}), late copies {}",
-        s.frames,
-        per_rx.join(" "),
-        s.messages,
-        front.aircraft,
-        back.fuser().tracks(),
-        s.fixes,
-        recent.0 as f64 / recent.1.max(1e-9),
-        f.suspect_flags,
-        f.conflicts,
-        f.rejected().iter().map(|(_, n)| n).sum::<u64>(),
-        f.fusion_fallbacks,
-        reg.unknown_senders.load(Ordering::Relaxed),
-        reg.socket_errors.load(Ordering::Relaxed),
-        reg.queue_drops.load(Ordering::Relaxed),
-        reg.kernel_drops.load(Ordering::Relaxed),
-        out_err,
-        out_dropped,
-        front.mlat_fixes,
-        front.self_synced_fixes,
-        s.late_copies,
-    );
-}
-
-pub(super) fn metrics(front: &FrontSnapshot, back: &Back, reg: &Registry, outputs: &Outputs) {
-    let s = &front.stats;
-    metrics::counter!("fuse1090_frames_total").absolute(s.frames);
-    metrics::counter!("fuse1090_frames_dispatched_total").absolute(front.dispatched);
-    metrics::counter!("fuse1090_messages_total").absolute(s.messages);
-    metrics::counter!("fuse1090_mlat_fixes_total").absolute(s.fixes);
-    metrics::counter!("fuse1090_mlat_self_synced_fixes_total").absolute(front.self_synced_fixes);
-    // Copies a link delivered after their transmission was processed.
-    metrics::counter!("fuse1090_late_copies_total").absolute(s.late_copies);
-    metrics::gauge!("fuse1090_tracks").set(back.fuser().tracks() as f64);
-    let held = AircraftHeld { tracker: back.fuser().tracks(), ..front.held };
-    for (table, n) in [
-        ("decoder", held.decoder),
-        ("mlat", held.mlat),
-        ("conformance", held.conformance),
-        ("tracker", held.tracker),
-    ] {
-        metrics::gauge!("fuse1090_aircraft_held", "table" => table).set(n as f64);
-    }
-    metrics::counter!("fuse1090_unknown_senders_total").absolute(reg.unknown_senders.load(Ordering::Relaxed));
-    metrics::counter!("fuse1090_socket_errors_total").absolute(reg.socket_errors.load(Ordering::Relaxed));
-    metrics::counter!("fuse1090_queue_drops_total").absolute(reg.queue_drops.load(Ordering::Relaxed));
-    for (name, http) in [("metrics_http", &reg.metrics_http), ("http", &reg.http)] {
-        let counts = [
-            ("refused", &http.refused),
-            ("timed_out", &http.timed_out),
-            ("accept_errors", &http.accept_errors),
-        ];
-        for (what, n) in counts {
-            metrics::counter!(format!("fuse1090_{name}_{what}_total")).absolute(n.load(Ordering::Relaxed));
-        }
-    }
-    // Datagrams lost in the kernel, the UDP inputs' buffers full.
-    metrics::counter!("fuse1090_udp_kernel_drops_total").absolute(reg.kernel_drops.load(Ordering::Relaxed));
-    // Frames waiting for the core: it fills before anything is dropped.
-    metrics::gauge!("fuse1090_queue_frames").set(reg.queued.load(Ordering::Relaxed) as f64);
-    for (r, c) in reg.receivers.read().expect("registry").iter() {
-        let counts = [
-            ("fuse1090_receiver_frames_total", &c.frames),
-            ("fuse1090_receiver_input_errors_total", &c.input_errors),
-            ("fuse1090_receiver_garbage_bytes_total", &c.garbage_bytes),
-            ("fuse1090_receiver_heartbeats_total", &c.heartbeats),
-            ("fuse1090_receiver_throttled_total", &c.throttled),
-            ("fuse1090_receiver_over_share_total", &c.over_share),
-            ("fuse1090_receiver_queue_drops_total", &c.queue_drops),
-        ];
-        for (name, n) in counts {
-            metrics::counter!(name, "receiver" => r.id.clone()).absolute(n.load(Ordering::Relaxed));
-        }
-    }
-    let f = back.fuser().stats();
-    metrics::counter!("fuse1090_tracks_published_total").absolute(f.published);
-    metrics::counter!("fuse1090_adsb_suspect_flags_total").absolute(f.suspect_flags);
-    // What the tracker turned away or could not do, each by its reason:
-    // the counted skips of bad input, where a user looks first.
-    for (reason, n) in f.rejected() {
-        metrics::counter!("fuse1090_measurements_rejected_total", "reason" => reason).absolute(n);
-    }
-    // Outside a track's gate: the outliers of normal operation, not bad input.
-    metrics::counter!("fuse1090_measurements_gated_total").absolute(f.gated);
-    metrics::counter!("fuse1090_track_restarts_total").absolute(f.restarts);
-    metrics::counter!("fuse1090_fusion_fallbacks_total").absolute(f.fusion_fallbacks);
-    metrics::counter!("fuse1090_output_errors_total")
-        .absolute(outputs.dests.iter().map(|d| d.errors()).sum());
-    // What slow readers cost: stdout lines, TCP subscribers dropped, batches
-    // a pushed connection missed.
-    metrics::counter!("fuse1090_output_drops_total")
-        .absolute(outputs.dests.iter().map(|d| d.dropped()).sum());
-    metrics::gauge!("fuse1090_output_clients")
-        .set(outputs.dests.iter().map(|d| d.clients()).sum::<u64>() as f64);
-    metrics::counter!("fuse1090_output_stream_bytes_total")
-        .absolute(outputs.dests.iter().map(|d| d.stream_bytes()).sum());
 }

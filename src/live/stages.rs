@@ -26,7 +26,7 @@ use std::time::{Duration, Instant};
 use super::inputs::Registry;
 use super::outputs::{self, FrameForward, Outputs};
 use super::record::Recorder;
-use super::{report, unix_now, web, ToCore, BATCH};
+use super::{readings, report, unix_now, web, ToCore, BATCH};
 use crate::core::front::KnownReceiver;
 use crate::core::{Back, Cmd, Core, CoreConfig, Event, Front, ReceiverNames};
 
@@ -283,7 +283,6 @@ impl FrontThread {
         report::FrontSnapshot {
             stats: *self.front.stats(),
             aircraft: self.front.decoder().stats().aircraft_created,
-            mlat_fixes: self.front.mlat().stats.fixes,
             self_synced_fixes: self.front.mlat().stats.self_synced_fixes,
             dispatched: self.dispatched,
             held: self.front.aircraft_held(),
@@ -362,7 +361,9 @@ impl BackThread {
                 next_stats = now + self.stats_every;
             }
             if now >= next_metrics {
-                report::metrics(&self.front, &self.back, &self.registry, &self.outputs);
+                for r in readings::readings(&self.front, &self.back, &self.registry, &self.outputs) {
+                    r.export();
+                }
                 next_metrics = now + 1.0;
             }
         }
@@ -373,7 +374,8 @@ impl BackThread {
     fn stats_line(&mut self, now: f64) {
         let (last, last_fixes) = self.last_stats;
         let interval = (self.front.stats.fixes - last_fixes, now - last);
-        report::stats_line(&self.front, &self.back, &self.registry, &self.outputs, interval);
+        let readings = readings::readings(&self.front, &self.back, &self.registry, &self.outputs);
+        tracing::info!("{}", readings::stats_line(&readings, interval));
         self.last_stats = (now, self.front.stats.fixes);
     }
 }
