@@ -56,7 +56,8 @@ impl Reading {
 
 use Kind::{Counter, Gauge};
 
-/// Every reading of this tick, in the stats line's order.
+/// Every reading of this tick: the totals in the stats line's order, then
+/// the labelled series.
 pub(super) fn readings(
     front: &FrontSnapshot,
     back: &Back,
@@ -130,6 +131,14 @@ pub(super) fn readings(
         Reading::new("fuse1090_output_clients", Gauge, sum(|d| d.clients()), None),
         Reading::new("fuse1090_output_stream_bytes_total", Counter, sum(|d| d.stream_bytes()), None),
     ];
+    series(front, back, reg, &mut r);
+    r
+}
+
+/// The labelled series: per reason, per table, per HTTP server, per receiver.
+fn series(front: &FrontSnapshot, back: &Back, reg: &Registry, r: &mut Vec<Reading>) {
+    let f = back.fuser().stats();
+    let load = |a: &std::sync::atomic::AtomicU64| a.load(Ordering::Relaxed);
     // What the tracker turned away or could not do, each by its reason:
     // the counted skips of bad input, where a user looks first.
     for (reason, n) in f.rejected() {
@@ -184,7 +193,6 @@ pub(super) fn readings(
             r.push(Reading::labelled(name, ("receiver", rx.id.clone()), load(n)));
         }
     }
-    r
 }
 
 /// The stats line: each reading it shows as `words value`, the receivers'
