@@ -18,6 +18,7 @@ pub mod cluster;
 pub mod cmd;
 pub mod config;
 pub mod live;
+pub mod stages;
 
 pub use fuse1090_core::{core, feed, fuse, geo, mlat, modes, problem, publish, track, FastMap};
 pub use fuse1090_sim::{eval, sim};

@@ -13,6 +13,7 @@ use crate::config::Config;
 use crate::core::{Back, Cmd, Core, Event, Front, ReceiverNames};
 use crate::feed::capture::{CaptureReader, CaptureRecord};
 use crate::publish::json::write_event;
+use crate::stages::{Sink, TwoStages};
 
 pub struct RunArgs {
     pub config: Option<PathBuf>,
@@ -100,19 +101,19 @@ pub fn run(args: RunArgs) -> Result<()> {
 /// Records per batch handed from the parsing thread to the core.
 const BATCH: usize = 4096;
 
-/// A batch of the front stage's commands for the back stage, with the front's
-/// own events (ADS-B reports, MLAT fixes) already written as JSON lines:
-/// `text[ends[k-1]..ends[k]]` is the k-th. The back stage is the pipeline's
-/// critical path and those events are over half of the output's bytes, so
-/// the front's thread, which had time to spare, writes them.
-struct Batch {
-    cmds: Vec<Cmd>,
+/// The front stage's own events of a batch (ADS-B reports, MLAT fixes,
+/// receiver records) already written as JSON lines: `text[ends[k-1]..ends[k]]`
+/// is the k-th. The back stage is the pipeline's critical path and those
+/// events are over half of the output's bytes, so the front's thread, which
+/// had time to spare, writes them.
+struct Written {
     text: Vec<u8>,
     ends: Vec<usize>,
 }
 
-impl Batch {
-    fn written(cmds: Vec<Cmd>, front: &Front) -> Batch {
+impl Written {
+    /// A batch's commands, and its front events written.
+    fn of(cmds: Vec<Cmd>, front: &Front) -> (Vec<Cmd>, Written) {
         // Sized for the batch's events up front (a record is 200-300
         // bytes): growing from empty copied each batch's text five times.
         let events = cmds.iter().filter(|c| matches!(c, Cmd::Event(ev) if Self::from_front(ev))).count();
@@ -125,12 +126,49 @@ impl Batch {
                 }
             }
         }
-        Batch { cmds, text, ends }
+        (cmds, Written { text, ends })
     }
 
-    /// The events the front stage makes (the back makes tracks and alerts).
+    /// The events the front stage makes that it writes (the back makes tracks and alerts).
     fn from_front(ev: &Event) -> bool {
         matches!(ev, Event::Position(_) | Event::Mlat(_))
+    }
+}
+
+/// The back stage's sink of `run --capture`: the events written to the
+/// file in order, the front's already as text, the back's written here
+/// between them.
+struct FileSink {
+    out: BufWriter<File>,
+    names: ReceiverNames,
+    line: Vec<u8>,
+}
+
+impl Sink for FileSink {
+    type With = Written;
+
+    fn batch(&mut self, _: &Back, events: &mut Vec<Event>, written: Written) -> Result<()> {
+        let names = self.names.read();
+        let mut ends = written.ends.iter();
+        let mut start = 0;
+        for ev in events.iter() {
+            let res = if Written::from_front(ev) {
+                let end = *ends.next().context("a front event without its text")?;
+                let text = &written.text[start..end];
+                start = end;
+                self.out.write_all(text)
+            } else {
+                self.line.clear();
+                write_event(&mut self.line, ev, |i| names.get(i));
+                self.out.write_all(&self.line)
+            };
+            res.context("writing output")?;
+        }
+        Ok(())
+    }
+
+    fn end(&mut self, _: &Back) -> Result<()> {
+        self.out.flush().context("writing output")
     }
 }
 
@@ -171,9 +209,12 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
     core_cfg.publish_source_tracks = cfg.publish_source_tracks;
     let (mut front, back) = Core::stages(&core_cfg);
     front.know(cfg.receiver.iter().map(|r| r.known()).collect());
-    let (cmd_tx, cmd_rx) = std::sync::mpsc::sync_channel::<Batch>(8);
-    let names = front.receiver_names();
-    let writer = named_thread("core-back", move || write_back(back, names, cmd_rx, out_file))?;
+    let sink = FileSink {
+        out: BufWriter::with_capacity(1 << 20, out_file),
+        names: front.receiver_names(),
+        line: Vec::new(),
+    };
+    let stages = TwoStages::start("core-back", back, sink, 8)?;
     let (mut first, mut last) = (f64::INFINITY, f64::NEG_INFINITY);
     let mut cmds = Vec::new();
     for batch in rx {
@@ -184,21 +225,20 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
             }
             front.on_record(rec, &mut cmds);
         }
-        // A writer that stopped (an output error) says why when joined.
+        // A writer that stopped (an output error) says why when finished.
         // The next batch's buffer at this one's size: growing a vector of
         // commands from empty every batch cost more than the commands' moves.
         let cap = cmds.len();
-        let batch = Batch::written(std::mem::replace(&mut cmds, Vec::with_capacity(cap)), &front);
-        if cmd_tx.send(batch).is_err() {
+        let (cmds, text) = Written::of(std::mem::replace(&mut cmds, Vec::with_capacity(cap)), &front);
+        if !stages.send(cmds, text) {
             break;
         }
     }
     let (skipped, errors) = parser.join().map_err(|_| anyhow::anyhow!("capture reader panicked"))??;
     front.finish(&mut cmds);
-    let _ = cmd_tx.send(Batch::written(cmds, &front));
-    drop(cmd_tx);
-    let (back, written) = writer.join().map_err(|_| anyhow::anyhow!("tracking thread panicked"))?;
-    written?;
+    let (cmds, text) = Written::of(cmds, &front);
+    stages.send(cmds, text);
+    let (back, _) = stages.finish()?;
     let diagnostics = diagnostics(&front, &back, last, &errors, skipped);
     let s = front.stats();
     Ok(Summary {
@@ -213,45 +253,6 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
         elapsed_s: started.elapsed().as_secs_f64(),
         diagnostics,
     })
-}
-
-/// The back stage's thread of `run_capture`: each batch's commands applied,
-/// and the events written in order (the front's already as text, the
-/// back's written here between them). Returns the stage, for its counters.
-fn write_back(
-    mut back: Back,
-    names: ReceiverNames,
-    batches: std::sync::mpsc::Receiver<Batch>,
-    out_file: File,
-) -> (Back, Result<()>) {
-    let mut out = BufWriter::with_capacity(1 << 20, out_file);
-    let (mut events, mut line) = (Vec::new(), Vec::new());
-    let write = || -> Result<()> {
-        for batch in batches {
-            back.apply(batch.cmds, &mut events);
-            let names = names.read();
-            // The front's own events come in the order of their commands,
-            // already written out; the back's are written here between them.
-            let mut ends = batch.ends.iter();
-            let mut start = 0;
-            for ev in events.drain(..) {
-                let written = if Batch::from_front(&ev) {
-                    let end = *ends.next().context("a front event without its text")?;
-                    let text = &batch.text[start..end];
-                    start = end;
-                    out.write_all(text)
-                } else {
-                    line.clear();
-                    write_event(&mut line, &ev, |i| names.get(i));
-                    out.write_all(&line)
-                };
-                written.context("writing output")?;
-            }
-        }
-        out.flush().context("writing output")
-    };
-    let res = write();
-    (back, res)
 }
 
 /// The run's reports for stderr: multilateration, its receivers, the

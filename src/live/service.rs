@@ -196,7 +196,7 @@ fn start_sink(
     rx: Receiver<ToCore>,
 ) -> Result<std::thread::JoinHandle<()>> {
     let Some(Sink::Cluster(nats, cluster)) = sink else {
-        return Ok(stages::start(core_cfg, setup, rx)?);
+        return stages::start(core_cfg, setup, rx);
     };
     let (out, publish) = mpsc::channel(16);
     tokio::spawn(async move {

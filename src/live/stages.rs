@@ -1,24 +1,24 @@
 //! The core's two threads in the daemon: the front stage (frames in,
 //! decoding, grouping, multilateration) and the back stage (tracking,
-//! fusion, the outputs), joined by a bounded queue of command batches, as
-//! `run --capture` runs them.
+//! fusion, the outputs), run by the same two-stage runner as `run
+//! --capture` ([`crate::stages::TwoStages`]); what differs is what drives
+//! the front and where the events go.
 //!
-//! The front thread sleeps until the next frame or the core's next
-//! deadline, whichever comes first: a group's wait running out
+//! The front thread ([`FrontThread`]) sleeps until the next frame or the
+//! core's next deadline, whichever comes first: a group's wait running out
 //! ([`Front::poll_timeout`]), a held publication or the conflict
 //! assessment in the tracker (its [`Back::poll_timeout`], which the back
 //! thread leaves in a [`Deadline`] after each batch), the once-a-second
 //! metrics, the receivers' line, systemd's watchdog. So a group is handed
 //! out at its deadline, not at the next poll, and an idle daemon wakes
-//! about once a second.
-//!
-//! Each thread is a struct holding what it owns, with a `run` loop:
-//! [`FrontThread`] and [`BackThread`].
+//! about once a second. The back thread's [`Sink`] ([`BackThread`])
+//! publishes each batch's events to the outputs and the map, and writes the
+//! stats line and the metrics.
 
 use std::collections::HashSet;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender};
+use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -29,6 +29,7 @@ use super::record::Recorder;
 use super::{readings, report, unix_now, web, ToCore, BATCH};
 use crate::core::front::KnownReceiver;
 use crate::core::{Back, Cmd, Core, CoreConfig, Event, Front, ReceiverNames};
+use crate::stages::{Sink, TwoStages};
 
 /// A time (Unix s) one thread leaves for another: the tracker's next
 /// deadline, for the front thread's sleep.
@@ -53,10 +54,11 @@ const MAX_SLEEP_S: f64 = 1.0;
 /// the front, whose input queue then drops (and counts) what it cannot take.
 const STAGE_QUEUE: usize = 64;
 
-/// What the front thread tells the back thread: the commands of a batch
-/// and the time they were made, or new outputs (SIGHUP).
-enum ToBack {
-    Batch { cmds: Vec<Cmd>, now: f64, front: report::FrontSnapshot },
+/// What the front thread sends the back thread with a batch of commands:
+/// the time they were made and its counters, or new outputs (SIGHUP, with
+/// no commands).
+pub(super) enum Tick {
+    Batch { now: f64, front: report::FrontSnapshot },
     Outputs(Outputs),
 }
 
@@ -74,40 +76,41 @@ pub(super) struct Setup {
     pub web: Option<Arc<web::WebData>>,
 }
 
-/// Starts the core's two threads; the front thread's handle (it joins the
-/// back thread before it ends). Frames and commands come through `rx`.
-pub(super) fn start(cfg: &CoreConfig, setup: Setup, rx: Receiver<ToCore>) -> std::io::Result<JoinHandle<()>> {
+/// Starts the core's two threads; the front thread's handle (it finishes
+/// the back stage before it ends). Frames and commands come through `rx`.
+pub(super) fn start(cfg: &CoreConfig, setup: Setup, rx: Receiver<ToCore>) -> anyhow::Result<JoinHandle<()>> {
     let (front, back) = Core::stages(cfg);
     let Setup { receivers, outputs, recorder, registry, stats_every, state_file, web } = setup;
-    let (to_back, from_front) = sync_channel::<ToBack>(STAGE_QUEUE);
     let tracker_due = Arc::new(Deadline::default());
+    let forward = outputs.frame_forward();
+    let sink = BackThread {
+        names: front.receiver_names(),
+        outputs,
+        registry: registry.clone(),
+        web: web.map(web::WebPublisher::new),
+        stats_every,
+        due: tracker_due.clone(),
+        front: report::FrontSnapshot::default(),
+        last_stats: (unix_now(), 0),
+        next_stats: unix_now() + stats_every,
+        next_metrics: 0.0,
+    };
+    let stages = TwoStages::start("tracker", back, sink, STAGE_QUEUE)?;
     let mut front = FrontThread {
         front,
         cmds: Vec::new(),
-        forward: outputs.frame_forward(),
+        forward,
         recorder,
-        registry: registry.clone(),
-        to_back,
-        tracker_due: tracker_due.clone(),
+        registry,
+        stages,
+        tracker_due,
         state_file,
         stats_every,
         dispatched: 0,
         announced: HashSet::new(),
     };
     front.take_up(receivers);
-    let back = BackThread {
-        names: front.front.receiver_names(),
-        back,
-        outputs,
-        registry,
-        web: web.map(web::WebPublisher::new),
-        stats_every,
-        due: tracker_due,
-        front: report::FrontSnapshot::default(),
-        last_stats: (unix_now(), 0),
-    };
-    let back = std::thread::Builder::new().name("tracker".into()).spawn(move || back.run(from_front))?;
-    std::thread::Builder::new().name("core".into()).spawn(move || front.run(rx, back))
+    Ok(std::thread::Builder::new().name("core".into()).spawn(move || front.run(rx))?)
 }
 
 /// The core's front thread: frames in, commands to the back thread, the
@@ -118,7 +121,7 @@ struct FrontThread {
     forward: FrameForward,
     recorder: Option<Recorder>,
     registry: Arc<Registry>,
-    to_back: SyncSender<ToBack>,
+    stages: TwoStages<BackThread>,
     tracker_due: Arc<Deadline>,
     state_file: Option<PathBuf>,
     stats_every: f64,
@@ -158,7 +161,7 @@ impl FrontThread {
         }
     }
 
-    fn run(mut self, rx: Receiver<ToCore>, back: JoinHandle<()>) {
+    fn run(mut self, rx: Receiver<ToCore>) {
         let mut timers = Timers {
             delay_metrics: 0.0,
             receivers_line: unix_now() + self.stats_every,
@@ -181,7 +184,7 @@ impl FrontThread {
                 break;
             }
         }
-        self.finish(back);
+        self.finish();
     }
 
     /// How long to wait for the next message: until the core's next
@@ -234,7 +237,7 @@ impl FrontThread {
                 }
                 ToCore::Outputs(o) => {
                     self.forward = o.frame_forward();
-                    if self.to_back.send(ToBack::Outputs(o)).is_err() {
+                    if !self.stages.send(Vec::new(), Tick::Outputs(o)) {
                         return false;
                     }
                 }
@@ -269,7 +272,7 @@ impl FrontThread {
         // thread at 1 M frames/s), as `run --capture` found before.
         let cap = self.cmds.len();
         let cmds = std::mem::replace(&mut self.cmds, Vec::with_capacity(cap));
-        if self.to_back.send(ToBack::Batch { cmds, now, front: self.snapshot() }).is_err() {
+        if !self.stages.send(cmds, Tick::Batch { now, front: self.snapshot() }) {
             return false;
         }
         if timers.watchdog.is_some_and(|w| timers.last_ping.elapsed() * 2 >= w) {
@@ -291,7 +294,7 @@ impl FrontThread {
 
     /// Everything pending processed and handed over, the learnt state saved,
     /// the tracker and the recording finished.
-    fn finish(mut self, back: JoinHandle<()>) {
+    fn finish(mut self) {
         self.front.finish(&mut self.cmds);
         if let Some(path) = &self.state_file {
             match self.front.mlat().learnt(unix_now()).save(path) {
@@ -300,10 +303,9 @@ impl FrontThread {
             }
         }
         let cmds = std::mem::take(&mut self.cmds);
-        let _ = self.to_back.send(ToBack::Batch { cmds, now: unix_now(), front: self.snapshot() });
-        drop(self.to_back);
-        if back.join().is_err() {
-            tracing::error!("the tracker thread panicked");
+        self.stages.send(cmds, Tick::Batch { now: unix_now(), front: self.snapshot() });
+        if let Err(e) = self.stages.finish() {
+            tracing::error!("the tracker stopped: {e:#}");
         }
         if let Some(w) = self.recorder {
             w.finish();
@@ -314,7 +316,6 @@ impl FrontThread {
 /// The core's back thread: commands in, tracks and alerts out to the
 /// outputs (with the front's events, in order), stats and metrics.
 struct BackThread {
-    back: Back,
     /// The receivers' ids, the front's table, to name them in events.
     names: ReceiverNames,
     outputs: Outputs,
@@ -328,53 +329,57 @@ struct BackThread {
     /// When the last stats line was written, and the fixes counted then:
     /// its rates are of the interval.
     last_stats: (f64, u64),
+    next_stats: f64,
+    next_metrics: f64,
+}
+
+impl Sink for BackThread {
+    type With = Tick;
+
+    fn batch(&mut self, back: &Back, events: &mut Vec<Event>, tick: Tick) -> anyhow::Result<()> {
+        let now = match tick {
+            Tick::Outputs(o) => {
+                self.outputs = o;
+                return Ok(());
+            }
+            Tick::Batch { now, front } => {
+                self.front = front;
+                now
+            }
+        };
+        self.due.set(back.poll_timeout());
+        let names = self.names.read();
+        self.outputs.publish(events, |i| names.get(i), now);
+        drop(names);
+        if let Some(w) = &mut self.web {
+            w.observe(events, now);
+            w.maybe_render(now, self.front.stats.messages, &self.registry);
+        }
+        if now >= self.next_stats {
+            self.stats_line(back, now);
+            self.next_stats = now + self.stats_every;
+        }
+        if now >= self.next_metrics {
+            for r in readings::readings(&self.front, back, &self.registry, &self.outputs) {
+                r.export();
+            }
+            self.next_metrics = now + 1.0;
+        }
+        Ok(())
+    }
+
+    fn end(&mut self, back: &Back) -> anyhow::Result<()> {
+        self.stats_line(back, unix_now());
+        outputs::flush_stdout(Duration::from_secs(1));
+        Ok(())
+    }
 }
 
 impl BackThread {
-    fn run(mut self, rx: Receiver<ToBack>) {
-        let mut events: Vec<Event> = Vec::new();
-        let mut next_metrics = 0.0;
-        let mut next_stats = unix_now() + self.stats_every;
-        for msg in rx {
-            let (cmds, now) = match msg {
-                ToBack::Outputs(o) => {
-                    self.outputs = o;
-                    continue;
-                }
-                ToBack::Batch { cmds, now, front } => {
-                    self.front = front;
-                    (cmds, now)
-                }
-            };
-            self.back.apply(cmds, &mut events);
-            self.due.set(self.back.poll_timeout());
-            let names = self.names.read();
-            self.outputs.publish(&events, |i| names.get(i), now);
-            drop(names);
-            if let Some(w) = &mut self.web {
-                w.observe(&events, now);
-                w.maybe_render(now, self.front.stats.messages, &self.registry);
-            }
-            events.clear();
-            if now >= next_stats {
-                self.stats_line(now);
-                next_stats = now + self.stats_every;
-            }
-            if now >= next_metrics {
-                for r in readings::readings(&self.front, &self.back, &self.registry, &self.outputs) {
-                    r.export();
-                }
-                next_metrics = now + 1.0;
-            }
-        }
-        self.stats_line(unix_now());
-        outputs::flush_stdout(Duration::from_secs(1));
-    }
-
-    fn stats_line(&mut self, now: f64) {
+    fn stats_line(&mut self, back: &Back, now: f64) {
         let (last, last_fixes) = self.last_stats;
         let interval = (self.front.stats.fixes - last_fixes, now - last);
-        let readings = readings::readings(&self.front, &self.back, &self.registry, &self.outputs);
+        let readings = readings::readings(&self.front, back, &self.registry, &self.outputs);
         tracing::info!("{}", readings::stats_line(&readings, interval));
         self.last_stats = (now, self.front.stats.fixes);
     }
