@@ -21,9 +21,12 @@
 //! scale, and crawled back over minutes).
 //!
 //! Beside it: what a track is given (`measurement.rs`) and what it gives
-//! (`estimate.rs`); its tests are in `track_tests.rs`. Within it: the
-//! horizontal position's measurement model, gate and restarts
-//! (`track/position.rs`) and the vertical channel (`track/vertical.rs`).
+//! (`estimate.rs`), its noise learner (`noise.rs`) and lifecycle
+//! (`lifecycle.rs`); its tests are in `track_tests.rs`. Within it, one
+//! measurement model per kind of observation: a horizontal position with
+//! its gate and restarts (`track/position.rs`), a velocity
+//! (`track/velocity.rs`), time differences (`track/tdoa.rs`) and the
+//! vertical channel's heights and climb rates (`track/vertical.rs`).
 
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -45,6 +48,8 @@ use super::noise::Noise;
 use super::plane::Plane;
 
 mod position;
+mod tdoa;
+mod velocity;
 mod vertical;
 pub use vertical::Vertical;
 
@@ -334,47 +339,7 @@ impl Track {
                 if let Some((c, var)) = climb {
                     self.vertical(m.t, 1, c, var);
                 }
-                let gate = self.gate;
-                // Reported in the aircraft's own east/north: turned into the
-                // plane's axes (they differ by the meridians' convergence,
-                // a third of a degree 20 km east or west at mid latitudes).
-                let r = match (self.state.plane, &self.state.imm) {
-                    (Some(plane), Some(imm)) => {
-                        let x = imm.mean();
-                        let (lat, lon) = plane.to_geodetic(x[0], x[1]);
-                        plane.from_local(lat, lon)
-                    }
-                    _ => Matrix2::identity(),
-                };
-                let vm = kf::velocity(r * v_en, r * cov * r.transpose());
-                match &mut self.state.imm {
-                    None => Outcome::Early,
-                    Some(imm) => match imm.prepare(dt) {
-                        // A velocity far outside the track's own: left out, not applied.
-                        prep if {
-                            let (nu, s) = prep.combined().innovation(&vm);
-                            !gate.admits(Gate::nis(&nu, &s))
-                        } =>
-                        {
-                            Outcome::Gated
-                        }
-                        prep => match (prep.combined(), imm.update(&prep, &vm)) {
-                            (pred, Some(step)) => {
-                                if self.keep_gain {
-                                    self.gain = gain(&pred, &step.estimate).map(|a| (m.t, a));
-                                }
-                                Outcome::Applied { nis: 0.0 }
-                            }
-                            (_, None) => {
-                                tracing::warn!("track filter went numerically bad on a velocity; restarting");
-                                self.state.imm = None;
-                                self.state.plane = None;
-                                self.restarts += 1;
-                                Outcome::Restarted
-                            }
-                        },
-                    },
-                }
+                self.velocity(m.t, dt, v_en, cov)
             }
             Observation::Height { h, var } => {
                 self.vertical(m.t, 0, h, var);
@@ -391,61 +356,6 @@ impl Track {
         }
         self.state.t = m.t;
         outcome
-    }
-
-    /// Time differences straight into the track (augmented UKF), with the
-    /// vertical channel's height: what a transmission heard by too few
-    /// receivers for a fix still says.
-    fn tdoa(&mut self, t: f64, dt: f64, sites: &[([f64; 3], f64, f64)]) -> Outcome {
-        let (Some(plane), Some(imm), Some(v)) =
-            (self.state.plane, self.state.imm.as_mut(), self.state.vertical)
-        else {
-            return Outcome::Early;
-        };
-        let mut v = v;
-        v.predict(t - self.state.t_v, self.cfg.vertical_q);
-        let c = crate::mlat::solver::C_AIR;
-        if !(2..=3).contains(&sites.len()) {
-            return Outcome::Gated;
-        }
-        let site = |i: usize| sites[i.min(sites.len() - 1)];
-        let m = super::ukf::Tdoa {
-            n: sites.len(),
-            receivers: std::array::from_fn(|i| plane.ecef_to_local(site(i).0)),
-            sigma_m: std::array::from_fn(|i| site(i).2 * c),
-            z: std::array::from_fn(|i| (site(i + 1).1 - sites[0].1) * c),
-        };
-        let (h, hv) = (v.x[0], v.p[(0, 0)]);
-        let up = |e: f64, n: f64, h: f64| plane.up_at(e, n, h);
-        let prep = imm.prepare(dt);
-        // One unscented transform at the combined prediction, as a linear
-        // regression every model applies (see `ukf`).
-        let combined = prep.combined();
-        let gate = self.gate;
-        let step = match m.n {
-            2 => super::ukf::linearise::<1>(&combined, h, hv, &m, up)
-                .and_then(|lin| Self::gated_update(imm, &prep, &lin, gate)),
-            _ => super::ukf::linearise::<2>(&combined, h, hv, &m, up)
-                .and_then(|lin| Self::gated_update(imm, &prep, &lin, gate)),
-        };
-        match step {
-            Some(nis) => Outcome::Applied { nis },
-            None => Outcome::Gated,
-        }
-    }
-
-    /// A linear update unless the combined prediction's NIS is beyond the gate.
-    fn gated_update<const M: usize>(
-        imm: &mut Imm,
-        prep: &super::imm::Prepared,
-        m: &Linear<M>,
-        gate: Gate,
-    ) -> Option<f64> {
-        let (nu, s) = prep.combined().innovation(m);
-        if !gate.admits(Gate::nis(&nu, &s)) {
-            return None;
-        }
-        imm.update(prep, m).map(|s| s.nis)
     }
 
     /// Where the track was at its newest horizontal update, without the
