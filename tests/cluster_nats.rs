@@ -440,7 +440,7 @@ fn a_cluster_of_processes_tracks_as_one_node_does_and_survives_a_killed_worker()
 /// tracked and multilaterated about as well as one node does offline. The
 /// publisher serves what a single node serves: JSON and ASTERIX CAT062 over
 /// UDP (every record of the track stream, every fused track), and the map's
-/// `aircraft.json` over HTTP.
+/// `aircraft.json` and `receivers.json` over HTTP.
 #[test]
 fn a_live_ingest_puts_its_receivers_frames_on_the_cluster() {
     let Some(server) = nats_server() else { return };
@@ -492,7 +492,8 @@ fn a_live_ingest_puts_its_receivers_frames_on_the_cluster() {
     std::thread::sleep(Duration::from_secs(3));
     ingest.stop();
     std::thread::sleep(Duration::from_secs(2));
-    let aircraft = aircraft_json(http_port);
+    let aircraft = document(http_port, "aircraft.json");
+    let receivers = document(http_port, "receivers.json");
     publisher.stop();
     let (json, asterix) = (json_rx.stop(), asterix_rx.stop());
     let printed: Vec<String> = workers.into_iter().map(Proc::stop).collect();
@@ -541,6 +542,14 @@ fn a_live_ingest_puts_its_receivers_frames_on_the_cluster() {
         .collect();
     eprintln!("aircraft.json at the end: {listed:?}");
     assert!(!listed.is_empty() && listed.is_subset(&live_tracked), "{listed:?} against {live_tracked:?}");
+    // And the network's receivers, as the ingest declared them.
+    let declared: BTreeSet<String> = (std::fs::read_to_string(&capture).unwrap().lines())
+        .filter_map(|l| l.strip_prefix("receiver ")?.split(' ').next().map(str::to_string))
+        .collect();
+    let on_map: BTreeSet<String> = (receivers["receivers"].as_array().unwrap().iter())
+        .filter_map(|r| r["id"].as_str().map(str::to_string))
+        .collect();
+    assert!(!declared.is_empty() && on_map == declared, "receivers.json {on_map:?}, declared {declared:?}");
     drop(nats);
 }
 
@@ -578,16 +587,16 @@ impl Datagrams {
     }
 }
 
-/// The publisher's `/data/aircraft.json`.
-fn aircraft_json(port: u16) -> serde_json::Value {
+/// One of the publisher's documents under `/data/`.
+fn document(port: u16, name: &str) -> serde_json::Value {
     use std::io::{Read, Write};
     let mut s = std::net::TcpStream::connect(("127.0.0.1", port)).expect("the publisher serves HTTP");
     s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
-    s.write_all(b"GET /data/aircraft.json HTTP/1.0\r\nHost: x\r\n\r\n").unwrap();
+    s.write_all(format!("GET /data/{name} HTTP/1.0\r\nHost: x\r\n\r\n").as_bytes()).unwrap();
     let mut text = String::new();
     let _ = s.read_to_string(&mut text);
     let body = text.split_once("\r\n\r\n").map(|(_, b)| b).unwrap_or_default();
-    serde_json::from_str(body).unwrap_or_else(|e| panic!("aircraft.json: {e}: {text}"))
+    serde_json::from_str(body).unwrap_or_else(|e| panic!("{name}: {e}: {text}"))
 }
 
 /// The addresses with a fused track.

@@ -23,6 +23,7 @@ use crate::fuse::conflict::{kinematics_at, Seen};
 use crate::fuse::{
     ConflictConfig, ConflictMonitor, Output, TrackReport, TrackSource, MIN_CONFLICT_SPEED_MPS,
 };
+use crate::live::config::ReceiverConfig;
 use crate::live::outputs::Outputs;
 use crate::live::registry::Registry;
 use crate::live::shutdown::Tasks;
@@ -236,7 +237,10 @@ pub async fn run(
             biased;
             d = declared.next() => {
                 if let Some(d) = d {
-                    p.ids.push(d?.id);
+                    // Listed on the map (its frames are the ingest's to count).
+                    let d = d?;
+                    p.sinks.registry.add(ReceiverConfig::declared(&d));
+                    p.ids.push(d.id);
                 }
                 continue;
             }

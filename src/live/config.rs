@@ -227,6 +227,24 @@ impl ReceiverConfig {
         self.beast_id.as_deref().and_then(BeastId::parse)
     }
 
+    /// A receiver known only by its declaration (where it is, its clock):
+    /// a cluster's publisher, which sees no frames, lists the network's
+    /// receivers on its map with these.
+    pub fn declared(d: &crate::feed::capture::ReceiverDecl) -> ReceiverConfig {
+        ReceiverConfig {
+            id: d.id.clone(),
+            lat: d.lat,
+            lon: d.lon,
+            alt_m: d.alt,
+            clock: d.clock,
+            source: None,
+            beast_id: None,
+            beast_id_takeover: false,
+            max_rate: 0.0,
+            timing: None,
+        }
+    }
+
     /// A receiver at 0,0 with a counter clock, known by `beast_id` only.
     #[cfg(test)]
     pub fn for_test(id: &str, beast_id: Option<&str>) -> ReceiverConfig {
