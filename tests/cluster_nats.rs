@@ -527,7 +527,7 @@ fn a_live_ingest_puts_its_receivers_frames_on_the_cluster() {
         asterix.len()
     );
     assert_eq!(sent, written, "the UDP JSON output is the track stream");
-    // ASTERIX: one record per fused track publication, in CAT062 blocks.
+    // ASTERIX: CAT062 blocks, each its category and length.
     let fused = written
         .iter()
         .filter(|l| l.contains("\"type\":\"track\"") && l.contains("\"source\":\"fused\""))
@@ -536,6 +536,34 @@ fn a_live_ingest_puts_its_receivers_frames_on_the_cluster() {
         .iter()
         .all(|b| b.first() == Some(&62) && u16::from_be_bytes([b[1], b[2]]) as usize == b.len()));
     assert!(!asterix.is_empty() && fused > 0);
+    // Read by an independent decoder, each CAT062 record is a fused track
+    // the publisher wrote: its number, address and position at its time.
+    if let Some(py) = common::python_with("asterix", "the cluster's ASTERIX not cross-checked") {
+        let decoded = common::decode_asterix(&py, &asterix, dir);
+        let fused_records: Vec<serde_json::Value> = (written.iter())
+            .filter(|l| l.contains("\"type\":\"track\"") && l.contains("\"source\":\"fused\""))
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect();
+        let unmatched: Vec<_> = (decoded.iter())
+            .filter(|(tn, adr, lat, lon, tod)| {
+                !fused_records.iter().any(|r| {
+                    r["id"].as_u64() == Some(*tn)
+                        && r["hex"].as_str().is_some_and(|h| h.eq_ignore_ascii_case(adr))
+                        // I062/070 rounds the time to 1/128 s.
+                        && (r["t"].as_f64().unwrap().rem_euclid(86_400.0) - tod).abs() <= 0.5 / 128.0 + 1e-6
+                        && (r["lat"].as_f64().unwrap() - lat).abs() < 1e-5
+                        && (r["lon"].as_f64().unwrap() - lon).abs() < 1e-5
+                })
+            })
+            .collect();
+        eprintln!(
+            "ASTERIX: {} records decoded by asterix_decoder for {fused} fused track records, {} unmatched",
+            decoded.len(),
+            unmatched.len()
+        );
+        assert!(!decoded.is_empty() && unmatched.is_empty(), "{unmatched:?}");
+        assert_eq!(decoded.len(), fused, "one CAT062 record per fused track publication");
+    }
     // The map's document: the aircraft tracked at the end, none that do not exist.
     let listed: BTreeSet<String> = (aircraft["aircraft"].as_array().unwrap().iter())
         .filter_map(|a| a["hex"].as_str().map(str::to_uppercase))

@@ -15,8 +15,8 @@
 use std::collections::{HashMap, HashSet};
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream, UdpSocket};
-use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::path::PathBuf;
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use fuse1090::feed::capture::{CaptureReader, ClockKind};
@@ -128,42 +128,6 @@ fn config(w: &World, ports: &[u16], outputs: &[(u16, &str)]) -> String {
 /// The Python with `asterix_decoder`, or `None` (with a message).
 fn python() -> Option<PathBuf> {
     common::python_with("asterix", "ASTERIX not cross-checked")
-}
-
-/// Decodes data blocks with asterix_decoder: (track number, address, lat, lon, time of day).
-fn decode_asterix(py: &Path, blocks: &[Vec<u8>], dir: &Path) -> Vec<(u64, String, f64, f64, f64)> {
-    let input = dir.join("blocks.hex");
-    std::fs::write(
-        &input,
-        blocks
-            .iter()
-            .map(|b| b.iter().map(|x| format!("{x:02x}")).collect::<String>() + "\n")
-            .collect::<String>(),
-    )
-    .unwrap();
-    let script = r#"
-import asterix, json, sys
-for line in open(sys.argv[1]):
-    for r in asterix.parse(bytes.fromhex(line.strip())):
-        print(json.dumps([r["I040"]["TrkN"]["val"], r["I380"]["ADR"]["ADR"]["val"],
-                          r["I105"]["Lat"]["val"], r["I105"]["Lon"]["val"], r["I070"]["ToT"]["val"]]))
-"#;
-    let out = Command::new(py).args(["-c", script]).arg(&input).output().unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    String::from_utf8(out.stdout)
-        .unwrap()
-        .lines()
-        .map(|l| {
-            let v: Value = serde_json::from_str(l).unwrap();
-            (
-                v[0].as_u64().unwrap(),
-                v[1].as_str().unwrap().to_string(),
-                v[2].as_f64().unwrap(),
-                v[3].as_f64().unwrap(),
-                v[4].as_f64().unwrap(),
-            )
-        })
-        .collect()
 }
 
 #[test]
@@ -316,7 +280,7 @@ fn daemon_end_to_end_over_loopback_with_faults() {
 
     // ASTERIX against JSON: same track numbers, addresses and positions.
     let Some(py) = python() else { return };
-    let decoded = decode_asterix(&py, &ax_dg, w.dir.path());
+    let decoded = common::decode_asterix(&py, &ax_dg, w.dir.path());
     assert!(decoded.len() > 100, "{} ASTERIX records", decoded.len());
     let by_key: HashMap<(u64, String), Vec<&Value>> =
         records.iter().filter(|r| r["type"] == "track").fold(HashMap::new(), |mut m, r| {

@@ -54,6 +54,46 @@ pub fn python_with(module: &str, unchecked: &str) -> Option<PathBuf> {
     None
 }
 
+/// Decodes data blocks with asterix_decoder: (track number, address, lat, lon, time of day).
+pub fn decode_asterix(
+    py: &std::path::Path,
+    blocks: &[Vec<u8>],
+    dir: &std::path::Path,
+) -> Vec<(u64, String, f64, f64, f64)> {
+    let input = dir.join("blocks.hex");
+    std::fs::write(
+        &input,
+        blocks
+            .iter()
+            .map(|b| b.iter().map(|x| format!("{x:02x}")).collect::<String>() + "\n")
+            .collect::<String>(),
+    )
+    .unwrap();
+    let script = r#"
+import asterix, json, sys
+for line in open(sys.argv[1]):
+    for r in asterix.parse(bytes.fromhex(line.strip())):
+        print(json.dumps([r["I040"]["TrkN"]["val"], r["I380"]["ADR"]["ADR"]["val"],
+                          r["I105"]["Lat"]["val"], r["I105"]["Lon"]["val"], r["I070"]["ToT"]["val"]]))
+"#;
+    let out = std::process::Command::new(py).args(["-c", script]).arg(&input).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| {
+            let v: serde_json::Value = serde_json::from_str(l).unwrap();
+            (
+                v[0].as_u64().unwrap(),
+                v[1].as_str().unwrap().to_string(),
+                v[2].as_f64().unwrap(),
+                v[3].as_f64().unwrap(),
+                v[4].as_f64().unwrap(),
+            )
+        })
+        .collect()
+}
+
 /// A fixture scenario (`fixtures/scenarios/NAME.toml`) simulated on another
 /// seed than its own (a world nothing was tuned on): its capture and truth.
 pub fn simulated(name: &str, seed: u64) -> (Vec<u8>, fuse1090::eval::Truth) {
