@@ -28,10 +28,9 @@ pub trait Sink: Send + 'static {
     /// events already written out, its counters, the time).
     type With: Send + 'static;
 
-    /// A batch applied: `events` are what its commands made, in order (the
-    /// sink may leave them, they are cleared after). An error stops the
-    /// thread, and the front's next send says so.
-    fn batch(&mut self, back: &Back, events: &mut Vec<Event>, with: Self::With) -> Result<()>;
+    /// A batch applied: `events` are what its commands made, in order. An
+    /// error stops the thread, and the front's next send says so.
+    fn batch(&mut self, back: &Back, events: &[Event], with: Self::With) -> Result<()>;
 
     /// After the last batch.
     fn end(&mut self, back: &Back) -> Result<()>;
@@ -55,7 +54,7 @@ impl<S: Sink> TwoStages<S> {
                 let run = || -> Result<()> {
                     for (cmds, with) in batches {
                         back.apply(cmds, &mut events);
-                        sink.batch(&back, &mut events, with)?;
+                        sink.batch(&back, &events, with)?;
                         events.clear();
                     }
                     sink.end(&back)

@@ -46,7 +46,7 @@ use async_nats::jetstream::{self, kv, stream};
 use serde::{Deserialize, Serialize};
 
 use crate::config::Config;
-use crate::problem::Problem;
+use crate::problem::{positive, Problem};
 
 /// What a process does in the cluster.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -126,9 +126,7 @@ impl ClusterConfig {
         if !(self.lease_s >= 1.0 && self.lease_s <= 60.0) {
             errs.push(at(format!("lease_s = {} must be in [1, 60]", self.lease_s)));
         }
-        if !(self.checkpoint_s > 0.0 && self.checkpoint_s.is_finite()) {
-            errs.push(at(format!("checkpoint_s = {} must be positive", self.checkpoint_s)));
-        }
+        positive("cluster", &[("checkpoint_s", self.checkpoint_s)], &mut errs);
         if self.max_stream_bytes < 1 << 20 {
             errs.push(at(format!("max_stream_bytes = {} must be at least 1 MiB", self.max_stream_bytes)));
         }

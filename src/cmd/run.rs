@@ -101,9 +101,8 @@ pub fn run(args: RunArgs) -> Result<()> {
 /// Records per batch handed from the parsing thread to the core.
 const BATCH: usize = 4096;
 
-/// The front stage's own events of a batch (ADS-B reports, MLAT fixes,
-/// receiver records) already written as JSON lines: `text[ends[k-1]..ends[k]]`
-/// is the k-th. The back stage is the pipeline's critical path and those
+/// The front stage's own ADS-B reports and MLAT fixes of a batch, already
+/// written as JSON lines: `text[ends[k-1]..ends[k]]` is the k-th. The back stage is the pipeline's critical path and those
 /// events are over half of the output's bytes, so the front's thread, which
 /// had time to spare, writes them.
 struct Written {
@@ -147,11 +146,11 @@ struct FileSink {
 impl Sink for FileSink {
     type With = Written;
 
-    fn batch(&mut self, _: &Back, events: &mut Vec<Event>, written: Written) -> Result<()> {
+    fn batch(&mut self, _: &Back, events: &[Event], written: Written) -> Result<()> {
         let names = self.names.read();
         let mut ends = written.ends.iter();
         let mut start = 0;
-        for ev in events.iter() {
+        for ev in events {
             let res = if Written::from_front(ev) {
                 let end = *ends.next().context("a front event without its text")?;
                 let text = &written.text[start..end];

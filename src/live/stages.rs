@@ -336,7 +336,7 @@ struct BackThread {
 impl Sink for BackThread {
     type With = Tick;
 
-    fn batch(&mut self, back: &Back, events: &mut Vec<Event>, tick: Tick) -> anyhow::Result<()> {
+    fn batch(&mut self, back: &Back, events: &[Event], tick: Tick) -> anyhow::Result<()> {
         let now = match tick {
             Tick::Outputs(o) => {
                 self.outputs = o;
@@ -355,32 +355,35 @@ impl Sink for BackThread {
             w.observe(events, now);
             w.maybe_render(now, self.front.stats.messages, &self.registry);
         }
-        if now >= self.next_stats {
-            self.stats_line(back, now);
-            self.next_stats = now + self.stats_every;
-        }
-        if now >= self.next_metrics {
-            for r in readings::readings(&self.front, back, &self.registry, &self.outputs) {
-                r.export();
+        let (stats_due, metrics_due) = (now >= self.next_stats, now >= self.next_metrics);
+        if stats_due || metrics_due {
+            // Read once for both when both fall due.
+            let readings = readings::readings(&self.front, back, &self.registry, &self.outputs);
+            if stats_due {
+                self.stats_line(&readings, now);
+                self.next_stats = now + self.stats_every;
             }
-            self.next_metrics = now + 1.0;
+            if metrics_due {
+                readings.iter().for_each(readings::Reading::export);
+                self.next_metrics = now + 1.0;
+            }
         }
         Ok(())
     }
 
     fn end(&mut self, back: &Back) -> anyhow::Result<()> {
-        self.stats_line(back, unix_now());
+        let readings = readings::readings(&self.front, back, &self.registry, &self.outputs);
+        self.stats_line(&readings, unix_now());
         outputs::flush_stdout(Duration::from_secs(1));
         Ok(())
     }
 }
 
 impl BackThread {
-    fn stats_line(&mut self, back: &Back, now: f64) {
+    fn stats_line(&mut self, readings: &[readings::Reading], now: f64) {
         let (last, last_fixes) = self.last_stats;
         let interval = (self.front.stats.fixes - last_fixes, now - last);
-        let readings = readings::readings(&self.front, back, &self.registry, &self.outputs);
-        tracing::info!("{}", readings::stats_line(&readings, interval));
+        tracing::info!("{}", readings::stats_line(readings, interval));
         self.last_stats = (now, self.front.stats.fixes);
     }
 }
