@@ -149,9 +149,13 @@ const BARO_LOOK_EVERY_S: f64 = 10.0;
 pub const BANNED_TTL_S: f64 = 86_400.0;
 /// With `self_survey`, a receiver's survey is looked at every this many measurements.
 const SURVEY_CHECK_EVERY: u64 = 200;
-/// Mean normalised innovation beyond which an aircraft is no longer a sync
-/// source (honest ones average about 1).
-const SYNC_SOURCE_MAX_NIS: f64 = 6.0;
+/// Mean clipped normalised innovation (each pair's clipped at
+/// [`super::sync::JUDGE_NIS_CLIP`]) beyond which an aircraft is no longer a sync
+/// source. An honest one averages about 1 plus 8 times the share of its
+/// pairs a late copy spoils: 4 is over a third of its pairs inconsistent,
+/// more than multipath does to receivers late on up to a sixth of their
+/// receptions; a position offset of a few hundred metres spoils about half.
+const SYNC_SOURCE_MAX_NIS: f64 = 4.0;
 impl Rx {
     /// Timing sigma (s) to weight this receiver with: its learnt core
     /// (which starts from the configured jitter), never better than a third

@@ -278,15 +278,16 @@ mod tests {
         assert_eq!(local.gps_peers(1), &[0]);
         assert_eq!(local.stats.updates, 0, "the node updated no filter itself");
         // The emitter judged against the snapshot: an honest one is about 1
-        // per converged pair, one 3 km off far more.
+        // per converged pair, one 3 km off disagrees on every pair (each
+        // counted at the clip).
         let SyncNote::Observed { copies, ranges, var, geom, .. } = note(100) else { unreachable!() };
         let lc: Vec<LocalCopy> = copies.iter().map(|&(rx, t)| LocalCopy { rx: rx as usize, t }).collect();
         let (nis, judged) = local.judge(&lc, &ranges, &var, &geom);
         assert_eq!(judged, 3);
-        assert!(nis / 3.0 < 9.0, "honest emitter: {nis}");
+        assert!(nis / 3.0 < 2.0, "honest emitter: {nis}");
         let off: Vec<f64> = ranges.iter().enumerate().map(|(k, r)| r + [3000.0, -3000.0, 0.0][k]).collect();
         let (bad, _) = local.judge(&lc, &off, &var, &geom);
-        assert!(bad / 3.0 > 50.0, "offset emitter: {bad}");
+        assert_eq!(bad, 3.0 * super::super::sync::JUDGE_NIS_CLIP, "offset emitter");
     }
 
     #[test]

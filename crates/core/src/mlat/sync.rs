@@ -95,6 +95,13 @@ pub struct Reference {
 /// Memory in sync transmissions: about the span a pair filter's estimate
 /// rests on.
 const REFERENCE_MEMORY: u32 = 20;
+/// A pair's normalised innovation counts at most this much (3 sigma) when
+/// an emitter is judged. A late copy (multipath) makes one pair's far
+/// larger, and unclipped, the few pairs of an honest aircraft heard by
+/// receivers with multipath outweighed all its consistent ones; clipped,
+/// what is judged is the share of pairs that disagree, which a wrong
+/// position makes large and a receiver's bad moments do not.
+pub(crate) const JUDGE_NIS_CLIP: f64 = 9.0;
 
 impl Reference {
     fn note(&mut self, addr: u32) {
@@ -274,7 +281,7 @@ impl ClockSync {
                 // neither judge the emitter nor count against its partner.
                 let (out_i, out_j) = (self.health[i].excluded, self.health[j].excluded);
                 if let (Some(nis), false) = (nis, out_i || out_j) {
-                    nis_sum += nis.min(100.0);
+                    nis_sum += nis.min(JUDGE_NIS_CLIP);
                     judged += 1;
                 }
                 let (ka, kb) = if ca.rx == i { (a, b) } else { (b, a) };
@@ -354,7 +361,7 @@ impl ClockSync {
                 };
                 let converged = f.updates > self.params.min_updates * 2;
                 if converged && !self.health[m.i].excluded && !self.health[m.j].excluded {
-                    nis_sum += f.nis(m.z, m.r, m.tau, &self.params).min(100.0);
+                    nis_sum += f.nis(m.z, m.r, m.tau, &self.params).min(JUDGE_NIS_CLIP);
                     judged += 1;
                 }
             }

@@ -7,10 +7,10 @@
 use super::*;
 
 impl Mlat {
-    /// Aircraft health: the mean normalised innovation of a source's sync
-    /// measurements against converged pairs is about 1 for an honest
-    /// aircraft (less, as the noise model is a little generous); a position
-    /// offset shows as a consistent bias and drives it far up. Past the
+    /// Aircraft health: the mean clipped normalised innovation of a
+    /// source's sync measurements against converged pairs is about 1 for an
+    /// honest aircraft, a little more where receivers have multipath; a
+    /// position offset biases most of its pairs and drives it up. Past the
     /// threshold the aircraft is no longer a sync source (for good: a
     /// spoofer does not become honest).
     pub(super) fn judge_sync_source(&mut self, addr: u32, nis_sum: f64, judged: u32) {
