@@ -142,6 +142,7 @@ pub(super) async fn stream(
         let read = sock.async_io(Interest::READABLE, || super::stamp::recv(&sock, &mut buf));
         let got = match idle {
             Some(idle) => tokio::time::timeout(idle, read).await.unwrap_or_else(|_| {
+                c.idle_timeouts.fetch_add(1, Ordering::Relaxed);
                 Err(std::io::Error::new(
                     std::io::ErrorKind::TimedOut,
                     format!("nothing received for {} s", input.idle_timeout_s),

@@ -53,7 +53,7 @@ use outputs::Outputs;
 const BATCH: usize = 512;
 
 pub(crate) use service::start_http;
-pub use service::{serve, signals};
+pub use service::{serve, serve_counted, signals, Counters};
 
 /// What the sockets and the signal handlers tell the core thread.
 pub enum ToCore {

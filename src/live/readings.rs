@@ -188,6 +188,9 @@ fn series(front: &FrontSnapshot, back: &Back, reg: &Registry, r: &mut Vec<Readin
             ("fuse1090_receiver_throttled_total", &c.throttled),
             ("fuse1090_receiver_over_share_total", &c.over_share),
             ("fuse1090_receiver_queue_drops_total", &c.queue_drops),
+            ("fuse1090_receiver_connects_total", &c.connects),
+            ("fuse1090_receiver_disconnects_total", &c.disconnects),
+            ("fuse1090_receiver_idle_timeouts_total", &c.idle_timeouts),
         ];
         for (name, n) in counts {
             r.push(Reading::labelled(name, ("receiver", rx.id.clone()), load(n)));

@@ -34,6 +34,8 @@ pub struct RxCounters {
     pub connection_log: LogGate,
     pub connects: AtomicU64,
     pub disconnects: AtomicU64,
+    /// Connections closed for silence (its input's `idle_timeout_s`).
+    pub idle_timeouts: AtomicU64,
     /// Removed from the configuration (SIGHUP): not taken on any input, its
     /// connections closed (see [`Registry::reconfigure`]).
     pub revoked: AtomicBool,
@@ -127,6 +129,11 @@ impl Registry {
     /// The index of a receiver of the current configuration.
     pub fn index_of(&self, id: &str) -> Option<usize> {
         self.find(|r| r.id == id)
+    }
+
+    /// The counters of a receiver of the current configuration.
+    pub fn counters_of(&self, id: &str) -> Option<Arc<RxCounters>> {
+        self.index_of(id).map(|at| self.counters(at))
     }
 
     /// The first receiver of the current configuration (not revoked) that `pred` accepts.

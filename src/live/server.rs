@@ -289,6 +289,21 @@ mod tests {
         (input, address)
     }
 
+    /// A Beast TCP server input on a free loopback port, running for
+    /// `reg` into `tx` until the stopper is told; its address.
+    async fn start_server(
+        reg: &Arc<Registry>,
+        tx: std::sync::mpsc::SyncSender<ToCore>,
+    ) -> (SocketAddr, crate::live::shutdown::Stopper, tokio::task::JoinHandle<()>) {
+        let (input, address) = server_input();
+        let bound = inputs::bind(&input).await.unwrap();
+        let (stopper, shutdown) = crate::live::shutdown::Stopper::new();
+        let task = inputs::spawn(input, bound, tx, reg.clone(), &shutdown);
+        // The input's task listening before the test connects.
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        (address, stopper, task)
+    }
+
     /// A connection to `to` from loopback address `from`.
     async fn connect(from: [u8; 4], to: SocketAddr) -> TcpStream {
         let s = tokio::net::TcpSocket::new_v4().unwrap();
@@ -318,14 +333,10 @@ mod tests {
         ] {
             reg.add(r);
         }
-        let (input, address) = server_input();
         let (tx, core) = sync_channel(100);
         let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
         rt.block_on(async {
-            let bound = inputs::bind(&input).await.unwrap();
-            let (stopper, shutdown) = crate::live::shutdown::Stopper::new();
-            let task = inputs::spawn(input, bound, tx, reg.clone(), &shutdown);
-            tokio::time::sleep(Duration::from_millis(50)).await;
+            let (address, stopper, task) = start_server(&reg, tx).await;
             let mut id = Vec::new();
             crate::feed::beast::encode_receiver_id(0x0102_0304_0506_0708, &mut id);
             let mut named_uuid = Vec::new();
@@ -376,7 +387,6 @@ mod tests {
         for r in kept.clone() {
             reg.add(r);
         }
-        let (input, address) = server_input();
         let (tx, _core) = sync_channel(1000);
         let named = |id: u64| {
             let mut b = Vec::new();
@@ -385,10 +395,7 @@ mod tests {
         };
         let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
         rt.block_on(async {
-            let bound = inputs::bind(&input).await.unwrap();
-            let (stopper, shutdown) = crate::live::shutdown::Stopper::new();
-            let task = inputs::spawn(input, bound, tx, reg.clone(), &shutdown);
-            tokio::time::sleep(Duration::from_millis(50)).await;
+            let (address, stopper, task) = start_server(&reg, tx).await;
             // Ten idle strangers from one address: four wait to name
             // themselves, six are closed at once.
             let mut crowd = Vec::new();

@@ -9,7 +9,7 @@
 use std::future::Future;
 use std::path::PathBuf;
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
@@ -92,6 +92,21 @@ async fn stop_inputs(inputs: Tasks) {
     }
 }
 
+/// The counters of a service run in-process, for whoever started it (a
+/// test, a program embedding the service): its [`Registry`] of receivers
+/// with their counters, there once [`serve_counted`] has made it. The stats
+/// line and Prometheus read the same atomics, so a test reading these reads
+/// what an operator sees, typed, without parsing the log.
+#[derive(Clone, Default)]
+pub struct Counters(Arc<OnceLock<Arc<Registry>>>);
+
+impl Counters {
+    /// The service's registry, once it has started.
+    pub fn registry(&self) -> Option<&Arc<Registry>> {
+        self.0.get()
+    }
+}
+
 /// The service on `cfg` until `shutdown` completes; each configuration from
 /// `reloads` applied in turn (receivers, inputs and outputs replaced, the
 /// core and its tracks kept). Its frames go to `sink` (a core when `None`).
@@ -101,9 +116,22 @@ pub async fn serve(
     shutdown: impl Future<Output = ()>,
     reloads: mpsc::Receiver<Config>,
 ) -> Result<()> {
+    serve_counted(cfg, sink, shutdown, reloads, &Counters::default()).await
+}
+
+/// [`serve`], its counters left in `counters` for the caller to read.
+pub async fn serve_counted(
+    cfg: Config,
+    sink: Option<Sink>,
+    shutdown: impl Future<Output = ()>,
+    reloads: mpsc::Receiver<Config>,
+    counters: &Counters,
+) -> Result<()> {
     let ingest_only = matches!(sink, Some(Sink::Cluster(..)));
     let cfg = for_sink(cfg, ingest_only);
     let registry = Arc::new(Registry { queue_frames: cfg.service.queue_frames, ..Default::default() });
+    // A service is started once per `Counters`: a second start keeps the first's.
+    let _ = counters.0.set(registry.clone());
     // Everything but the inputs stops at the end (a reload replaces those).
     let mut rest = Tasks::default();
     let web = start_http(&cfg, &registry, &mut rest).await?;
