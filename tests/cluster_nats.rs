@@ -82,6 +82,12 @@ fn nats_server() -> Option<PathBuf> {
 
 fn start_nats(server: &Path, dir: &Path) -> (Proc, u16) {
     let port = common::free_port();
+    (start_nats_on(server, dir, port), port)
+}
+
+/// nats-server on `port`, its JetStream store in `dir` (so that one started
+/// again there has what the first stored).
+fn start_nats_on(server: &Path, dir: &Path, port: u16) -> Proc {
     let child = Command::new(server)
         .args(["-js", "-a", "127.0.0.1", "-p", &port.to_string(), "-sd"])
         .arg(dir.join("js"))
@@ -94,7 +100,18 @@ fn start_nats(server: &Path, dir: &Path) -> (Proc, u16) {
         assert!(started.elapsed() < Duration::from_secs(10), "nats-server did not start");
         std::thread::sleep(Duration::from_millis(50));
     }
-    (Proc(child), port)
+    Proc(child)
+}
+
+/// What goes wrong during a cluster run.
+#[derive(Clone, Copy, Debug)]
+enum Fault {
+    None,
+    /// Worker 2 killed (SIGKILL) that long after the replay was stored.
+    KillWorker(Duration),
+    /// nats-server stopped that long after the ingest started (while it
+    /// publishes), and started again a second later on its store.
+    RestartNats(Duration),
 }
 
 /// The `[cluster]` table of one role of cluster `name`.
@@ -168,17 +185,12 @@ struct ClusterRun {
     workers: Vec<BTreeMap<String, u64>>,
 }
 
-/// One cluster run over `capture`; with `kill_after`, worker 2 is killed
-/// (SIGKILL) that long after the replay was stored; with `garbage`, a
-/// malformed message goes on a frame, a sync and an event subject.
-fn run_cluster(
-    dir: &Path,
-    port: u16,
-    name: &str,
-    capture: &Path,
-    kill_after: Option<Duration>,
-    garbage: bool,
-) -> ClusterRun {
+/// One cluster run over `capture`, with `fault` (nats-server restarted
+/// through `nats`); with `garbage`, a malformed message goes on a frame, a
+/// sync and an event subject.
+fn run_cluster(nats: &mut NatsServer, name: &str, capture: &Path, fault: Fault, garbage: bool) -> ClusterRun {
+    let (dir, port) = (nats.dir.clone(), nats.port);
+    let dir = dir.as_path();
     let output = dir.join(format!("{name}.jsonl"));
     let (clock, workers, mut publisher) = start_roles(dir, name, port, 3, &output, "");
     if garbage {
@@ -193,11 +205,18 @@ fn run_cluster(
         .arg(config(dir, name, port, "ingest"))
         .arg("--capture")
         .arg(capture)
-        .output()
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
         .unwrap();
+    if let Fault::RestartNats(after) = fault {
+        std::thread::sleep(after);
+        nats.restart();
+    }
+    let ingest = ingest.wait_with_output().unwrap();
     assert!(ingest.status.success(), "ingest: {}", String::from_utf8_lossy(&ingest.stderr));
     let mut workers: Vec<Option<Proc>> = workers.into_iter().map(Some).collect();
-    if let Some(after) = kill_after {
+    if let Fault::KillWorker(after) = fault {
         std::thread::sleep(after);
         let mut victim = workers[1].take().unwrap();
         victim.0.kill().unwrap();
@@ -233,6 +252,32 @@ fn run_cluster(
         publisher: figures(&published, "publisher"),
         clock: figures(&clock_out, "clock"),
         workers,
+    }
+}
+
+/// The test's nats-server, which it may stop and start again.
+struct NatsServer {
+    server: PathBuf,
+    dir: PathBuf,
+    port: u16,
+    proc: Option<Proc>,
+}
+
+impl NatsServer {
+    fn start(server: &Path, dir: &Path) -> NatsServer {
+        let (proc, port) = start_nats(server, dir);
+        NatsServer { server: server.to_path_buf(), dir: dir.to_path_buf(), port, proc: Some(proc) }
+    }
+
+    /// Stopped (SIGTERM: its store written out, as a service manager stops
+    /// it), then started again a second later on the same port and store.
+    fn restart(&mut self) {
+        let mut p = self.proc.take().expect("running");
+        // SAFETY: kill(2) with the pid of a child not yet waited for.
+        unsafe { libc::kill(p.0.id() as i32, libc::SIGTERM) };
+        p.0.wait().unwrap();
+        std::thread::sleep(Duration::from_secs(1));
+        self.proc = Some(start_nats_on(&self.server, &self.dir, self.port));
     }
 }
 
@@ -370,7 +415,7 @@ fn a_cluster_of_processes_tracks_as_one_node_does_and_survives_a_killed_worker()
         .expect("the single node's pair updates");
 
     // NATS unreachable: a clear error and a failed exit, at once.
-    let (nats, port) = start_nats(&server, dir);
+    let mut nats = NatsServer::start(&server, dir);
     let dead = Command::new(BIN)
         .args(["run", "--config"])
         .arg(config(dir, "nowhere", common::free_port(), "worker"))
@@ -379,9 +424,14 @@ fn a_cluster_of_processes_tracks_as_one_node_does_and_survives_a_killed_worker()
     assert!(!dead.status.success());
     assert!(String::from_utf8_lossy(&dead.stderr).contains("cannot connect to NATS"), "{dead:?}");
 
-    for (name, kill) in [("whole", None), ("killed", Some(Duration::from_secs(3)))] {
-        let garbage = kill.is_none();
-        let run = run_cluster(dir, port, name, &capture_path, kill, garbage);
+    let faults = [
+        ("whole", Fault::None),
+        ("killed", Fault::KillWorker(Duration::from_secs(3))),
+        ("restarted", Fault::RestartNats(Duration::from_millis(1500))),
+    ];
+    for (name, fault) in faults {
+        let garbage = matches!(fault, Fault::None);
+        let run = run_cluster(&mut nats, name, &capture_path, fault, garbage);
         let many = report(&truth, &run.output);
         eprintln!(
             "{name}: ingest {:?}\n publisher {:?}\n clock {:?}\n workers {:?}",
@@ -426,9 +476,21 @@ fn a_cluster_of_processes_tracks_as_one_node_does_and_survives_a_killed_worker()
             let numbers: BTreeSet<u64> = v.iter().map(|x| x.1).collect();
             assert_eq!(numbers.len(), 1, "{name}: {hex} numbered {numbers:?}");
         }
-        if kill.is_some() {
+        match fault {
             // The two left took four partitions at the start and two of the lost one's each.
-            assert!(run.workers.iter().all(|w| w["partitions_taken"] == 6), "{:?}", run.workers);
+            Fault::KillWorker(_) => {
+                assert!(run.workers.iter().all(|w| w["partitions_taken"] == 6), "{:?}", run.workers)
+            }
+            // The outage was met (stores sent again) and outlived: every
+            // process ended well, nothing lost (above).
+            Fault::RestartNats(_) => {
+                let retries = run.ingest["nats_retries"]
+                    + run.clock["nats_retries"]
+                    + run.publisher["nats_retries"]
+                    + run.workers.iter().map(|w| w["nats_retries"]).sum::<u64>();
+                assert!(retries > 0, "the restart went unnoticed");
+            }
+            Fault::None => {}
         }
     }
     drop(nats);

@@ -10,10 +10,10 @@
 //!
 //! [`Merger`] is the sans-IO part, tested without NATS.
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use async_nats::jetstream::consumer::{pull, AckPolicy, DeliverPolicy};
-use futures_util::StreamExt;
 
+use super::outage::{retry, Follow};
 use super::wire::{self, SyncBatch};
 use super::{header, ClusterConfig, Mark, Nats, Watermarks};
 use crate::core::front::RECEIVER_REPORT_S;
@@ -106,20 +106,16 @@ pub async fn run(nats: &Nats, cfg: &ClusterConfig, mlat: &crate::mlat::MlatConfi
     // The receivers, in declaration order, before notes name them.
     let mut declared = nats.receiver_declarations().await?;
     let name = format!("{}-clock", cfg.name);
-    // Started again, the clock relearns: its notes from the start are long gone or stale.
-    let _ = nats.sync.delete_consumer(&name).await;
-    let consumer = nats
-        .sync
-        .create_consumer(pull::Config {
-            durable_name: Some(name),
-            ack_policy: AckPolicy::None,
-            // From the first: the workers wait for what a late clock would skip.
-            deliver_policy: DeliverPolicy::All,
-            ..Default::default()
-        })
-        .await
-        .context("cannot consume the sync notes")?;
-    let mut msgs = consumer.messages().await?;
+    // Started again, the clock relearns (`fresh`): its notes from the start
+    // are long gone or stale.
+    let config = pull::Config {
+        durable_name: Some(name),
+        ack_policy: AckPolicy::None,
+        // From the first: the workers wait for what a late clock would skip.
+        deliver_policy: DeliverPolicy::All,
+        ..Default::default()
+    };
+    let mut msgs = Follow::start(&nats.sync, config, true, "the sync notes").await?;
     // Receiver records once a minute of data time, as one node's, and at the end.
     let (mut next_records, mut last_t) = (f64::NAN, f64::NAN);
     loop {
@@ -133,7 +129,7 @@ pub async fn run(nats: &Nats, cfg: &ClusterConfig, mlat: &crate::mlat::MlatConfi
             }
             m = msgs.next() => {
                 let Some(m) = m else { break };
-                let m = m.map_err(|e| anyhow::anyhow!("sync stream: {e}"))?;
+                let m = m?;
                 let end = super::is_end(&m.message);
                 let batch = match wire::decode::<SyncBatch>(&m.payload) {
                     Ok(b) => b,
@@ -144,7 +140,8 @@ pub async fn run(nats: &Nats, cfg: &ClusterConfig, mlat: &crate::mlat::MlatConfi
                     }
                 };
                 if let Some(s) = merger.on_batch(batch, end) {
-                    nats.clock.put("snapshot", wire::encode(&s).into()).await.context("cannot store the clock snapshot")?;
+                    let snapshot = bytes::Bytes::from(wire::encode(&s));
+                    retry("storing the clock snapshot", || nats.clock.put("snapshot", snapshot.clone())).await?;
                     if s.t.is_finite() {
                         last_t = s.t;
                         if next_records.is_nan() {
@@ -165,7 +162,7 @@ pub async fn run(nats: &Nats, cfg: &ClusterConfig, mlat: &crate::mlat::MlatConfi
     let s = merger.stats;
     println!(
         "clock: batches={} notes={} applied={} sync_updates={} replayed_batches={} duplicate_resets={} \
-         unknown_receiver={} bad_batches={} snapshots={} receiver_records={}",
+         unknown_receiver={} bad_batches={} snapshots={} receiver_records={} nats_retries={}",
         s.batches,
         s.notes,
         s.applied,
@@ -175,7 +172,8 @@ pub async fn run(nats: &Nats, cfg: &ClusterConfig, mlat: &crate::mlat::MlatConfi
         s.unknown_receiver,
         s.bad_batches,
         s.snapshots,
-        s.receiver_records
+        s.receiver_records,
+        super::outage::retries()
     );
     Ok(s)
 }
@@ -188,10 +186,8 @@ async fn publish_records(nats: &Nats, merger: &mut Merger, t: f64, end: bool) ->
         merger.clock.receiver_reports(t).into_iter().map(|r| Event::Receiver(Box::new(r))).collect();
     merger.stats.receiver_records += events.len() as u64;
     let h = super::headers(&format!("r{t}-{end}"), end, &[(header::TIME, t)]);
-    let ack =
-        nats.js.publish_with_headers(nats.names.clock_records(), h, wire::encode(&events).into()).await?;
-    ack.await.context("cannot store the receiver records")?;
-    Ok(())
+    nats.store(nats.names.clock_records(), h, wire::encode(&events).into(), "storing the receiver records")
+        .await
 }
 
 #[cfg(test)]

@@ -14,9 +14,9 @@ use std::io::BufReader;
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use async_nats::jetstream::context::PublishAckFuture;
 use async_nats::HeaderMap;
 
+use super::outage::Storing;
 use super::wire::{frame_address, partition_of, BatchWriter};
 use super::{header, headers, ClusterConfig, Nats};
 use crate::feed::capture::{CaptureFrame, CaptureReader, CaptureRecord, ReceiverDecl};
@@ -81,7 +81,7 @@ impl Batcher {
 
 struct Publisher<'a> {
     nats: &'a Nats,
-    pending: VecDeque<PublishAckFuture>,
+    pending: VecDeque<Storing>,
 }
 
 impl Publisher<'_> {
@@ -89,8 +89,7 @@ impl Publisher<'_> {
         if self.pending.len() >= IN_FLIGHT {
             self.settle(IN_FLIGHT / 2).await?;
         }
-        let ack = self.nats.js.publish_with_headers(subject, headers, payload.into()).await?;
-        self.pending.push_back(ack);
+        self.pending.push_back(self.nats.send(subject, headers, payload.into()).await?);
         Ok(())
     }
 
@@ -106,15 +105,16 @@ impl Publisher<'_> {
     async fn declare(&mut self, d: &ReceiverDecl) -> Result<()> {
         let body = serde_json::to_vec(d)?;
         self.settle(0).await?;
-        let ack = self.nats.js.publish(self.nats.names.receivers(), body.into()).await?;
-        ack.await.context("JetStream did not store a receiver")?;
-        Ok(())
+        // Its id: a declaration sent again after a lost acknowledgement is
+        // stored once (a second copy would shift every later index).
+        let h = headers(&format!("d{}-{}", std::process::id(), d.id), false, &[]);
+        self.nats.store(self.nats.names.receivers(), h, body.into(), "storing a receiver").await
     }
 
     async fn settle(&mut self, keep: usize) -> Result<()> {
         while self.pending.len() > keep {
-            let ack = self.pending.pop_front().expect("non-empty");
-            ack.await.context("JetStream did not store a frame batch")?;
+            let sent = self.pending.pop_front().expect("non-empty");
+            sent.stored(self.nats, "storing a frame batch").await?;
         }
         Ok(())
     }
@@ -155,7 +155,13 @@ pub async fn replay(nats: &Nats, cfg: &ClusterConfig, capture: &Path) -> Result<
         skipped_lines = reader.skipped,
         "ingest: capture replayed"
     );
-    println!("ingest: frames={} batches={} no_address={}", stats.frames, stats.batches, stats.no_address);
+    println!(
+        "ingest: frames={} batches={} no_address={} nats_retries={}",
+        stats.frames,
+        stats.batches,
+        stats.no_address,
+        super::outage::retries()
+    );
     Ok(stats)
 }
 

@@ -34,6 +34,7 @@
 
 pub mod clock;
 pub mod ingest;
+pub mod outage;
 pub mod publisher;
 pub mod wire;
 pub mod worker;
@@ -193,10 +194,24 @@ pub mod header {
 /// How far each partition's batches have come, for a stage that waits for
 /// all of them (the clock, the publisher). A partition that has ended holds
 /// nobody back.
+///
+/// A batch may come after a later one of its partition: a worker's store
+/// that NATS lost is sent again after the ones its client kept through
+/// the outage. So what was taken is remembered by batch time over
+/// [`REORDER_WINDOW_S`], not only as the newest time, and a late batch
+/// never taken is taken.
 pub struct Watermarks {
     at: Vec<f64>,
     ended: Vec<bool>,
+    /// The times of the batches taken lately, per partition (as bits: the
+    /// times are positive, so their bits sort as they do).
+    taken: Vec<std::collections::BTreeSet<u64>>,
 }
+
+/// How far (s of data time) behind its partition's newest a batch may come
+/// and still be taken; older ones are taken to be replays. A reordering by
+/// an outage spans the batches in flight, a few seconds of data at most.
+pub const REORDER_WINDOW_S: f64 = 60.0;
 
 /// What a partition's batch is to the stage.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -214,20 +229,25 @@ impl Watermarks {
         Watermarks {
             at: vec![f64::NEG_INFINITY; partitions as usize],
             ended: vec![false; partitions as usize],
+            taken: vec![Default::default(); partitions as usize],
         }
     }
 
     /// Partition `p`'s batch running to `t` (its last when `end`).
     pub fn mark(&mut self, p: usize, t: f64, end: bool) -> Mark {
-        match self.at.get_mut(p) {
-            None => Mark::Unknown,
-            Some(at) if t <= *at => Mark::Replayed,
-            Some(at) => {
-                *at = t;
-                self.ended[p] |= end;
-                Mark::New
-            }
+        let (Some(at), Some(taken)) = (self.at.get_mut(p), self.taken.get_mut(p)) else {
+            return Mark::Unknown;
+        };
+        if t <= *at - REORDER_WINDOW_S || !taken.insert(t.to_bits()) {
+            return Mark::Replayed;
         }
+        *at = at.max(t);
+        let floor = (*at - REORDER_WINDOW_S).max(0.0).to_bits();
+        while taken.first().is_some_and(|&b| b < floor) {
+            taken.pop_first();
+        }
+        self.ended[p] |= end;
+        Mark::New
     }
 
     /// The time every partition still running has reached (infinite once all have ended).
@@ -320,21 +340,27 @@ impl Nats {
 impl Nats {
     /// Every receiver declared, in declaration order from the first (the
     /// order gives each its index, so one unreadable is an error, not a skip).
-    pub async fn receiver_declarations(
-        &self,
-    ) -> Result<impl futures_util::Stream<Item = Result<crate::feed::capture::ReceiverDecl>> + use<>> {
-        let consumer = (self.receivers)
-            .create_consumer(jetstream::consumer::pull::OrderedConfig {
-                deliver_policy: jetstream::consumer::DeliverPolicy::All,
-                ..Default::default()
-            })
-            .await
-            .context("cannot read the receiver stream")?;
-        let msgs = consumer.messages().await.context("cannot read the receiver stream")?;
-        Ok(futures_util::StreamExt::map(msgs, |m| {
-            let m = m.context("receiver stream")?;
-            serde_json::from_slice(&m.payload).context("receiver declaration unreadable")
-        }))
+    pub async fn receiver_declarations(&self) -> Result<Declarations> {
+        let config = jetstream::consumer::pull::Config {
+            deliver_policy: jetstream::consumer::DeliverPolicy::All,
+            ack_policy: jetstream::consumer::AckPolicy::None,
+            ..Default::default()
+        };
+        Ok(Declarations(outage::Follow::start(&self.receivers, config, true, "the receiver stream").await?))
+    }
+}
+
+/// The receivers' declarations as they come ([`Nats::receiver_declarations`]).
+pub struct Declarations(outage::Follow);
+
+impl Declarations {
+    /// The next declaration, or `None` once the stream ends.
+    pub async fn next(&mut self) -> Option<Result<crate::feed::capture::ReceiverDecl>> {
+        let m = match self.0.next().await? {
+            Ok(m) => m,
+            Err(e) => return Some(Err(e)),
+        };
+        Some(serde_json::from_slice(&m.payload).context("receiver declaration unreadable"))
     }
 }
 

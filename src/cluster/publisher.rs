@@ -14,8 +14,8 @@ use std::sync::Arc;
 
 use anyhow::{Context, Result};
 use async_nats::jetstream::consumer::{pull, AckPolicy, DeliverPolicy};
-use futures_util::StreamExt;
 
+use super::outage::Follow;
 use super::{header, wire, ClusterConfig, Mark, Nats, Watermarks};
 use crate::config::Config;
 use crate::core::{CoreConfig, Event};
@@ -216,20 +216,13 @@ pub async fn run(
     // The receivers, in declaration order, for the records that name them.
     let mut declared = nats.receiver_declarations().await?;
     let name = format!("{}-publisher", cfg.name);
-    let consumer = nats
-        .events
-        .get_or_create_consumer(
-            &name,
-            pull::Config {
-                durable_name: Some(name.clone()),
-                ack_policy: AckPolicy::None,
-                deliver_policy: DeliverPolicy::All,
-                ..Default::default()
-            },
-        )
-        .await
-        .context("cannot consume the events")?;
-    let mut msgs = consumer.messages().await?;
+    let config = pull::Config {
+        durable_name: Some(name.clone()),
+        ack_policy: AckPolicy::None,
+        deliver_policy: DeliverPolicy::All,
+        ..Default::default()
+    };
+    let mut msgs = Follow::start(&nats.events, config, false, "the events").await?;
     loop {
         let ended = p.marks.all_ended();
         let m = tokio::select! {
@@ -251,7 +244,7 @@ pub async fn run(
             }
         };
         let Some(m) = m else { break };
-        let m = m.map_err(|e| anyhow::anyhow!("event stream: {e}"))?;
+        let m = m?;
         if p.on_message(&m)? {
             break;
         }
@@ -260,14 +253,16 @@ pub async fn run(
     http_tasks.stop(std::time::Duration::from_secs(2)).await;
     let stats = p.stats;
     println!(
-        "publisher: batches={} frames={} events={} conflicts={} replayed_batches={} bad_batches={} unknown_receivers={}",
+        "publisher: batches={} frames={} events={} conflicts={} replayed_batches={} bad_batches={} \
+         unknown_receivers={} nats_retries={}",
         stats.batches,
         stats.frames,
         stats.events,
         p.cross.raised,
         stats.replayed_batches,
         stats.bad_batches,
-        stats.unknown_receivers
+        stats.unknown_receivers,
+        super::outage::retries()
     );
     Ok(stats)
 }

@@ -17,10 +17,11 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use async_nats::jetstream::consumer::{pull, AckPolicy, DeliverPolicy};
-use async_nats::jetstream::context::PublishAckFuture;
+use async_nats::jetstream::kv;
 use async_nats::jetstream::Message;
 use futures_util::StreamExt;
 
+use super::outage::{retry, Storing};
 use super::wire::{self, read_batch, Checkpoint, SyncBatch};
 use super::{header, headers, ClusterConfig, Nats};
 use crate::core::{Core, CoreConfig, Event};
@@ -64,6 +65,12 @@ enum FromCore {
         p: u32,
         bytes: Vec<u8>,
     },
+    /// A batch delivered again that this worker already processed (through
+    /// a consumer made again): acknowledged without its results, which the
+    /// first copy's store carries and precedes this in the queue of stores.
+    /// Left unacknowledged, it came back after every `ack_wait`, and enough
+    /// of them held the partition's consumer at its pending limit for good.
+    Redelivered(Box<Message>),
 }
 
 /// What the processing thread counts.
@@ -88,7 +95,7 @@ impl std::fmt::Display for WorkerStats {
         write!(
             f,
             "worker: batches={} frames={} bad_batches={} sync_updates={} sync_notes={} partitions_taken={} \
-             receiver_records_dropped={} redelivered={}",
+             receiver_records_dropped={} redelivered={} nats_retries={}",
             self.batches,
             self.frames,
             self.bad_batches,
@@ -96,7 +103,8 @@ impl std::fmt::Display for WorkerStats {
             self.sync_notes,
             self.partitions_taken,
             self.receiver_records,
-            self.redelivered
+            self.redelivered,
+            super::outage::retries()
         )
     }
 }
@@ -179,10 +187,20 @@ impl Processor {
                 if let Some(part) = self.parts.get_mut(&b.p) {
                     if b.seq != 0 && b.seq <= part.last_seq {
                         self.stats.redelivered += 1;
+                        // Acknowledged once the first copy is done: while it
+                        // waits in the queue, its own acknowledgement will do.
+                        if !part.queue.iter().any(|q| q.seq == b.seq) {
+                            let _ = self.out.send(FromCore::Redelivered(Box::new(b.msg)));
+                        }
                         return;
                     }
-                    part.last_seq = b.seq;
-                    part.queue.push_back(*b);
+                    part.last_seq = part.last_seq.max(b.seq);
+                    // In time order: a batch that NATS lost and the ingest
+                    // sent again comes after later ones, and a later one at
+                    // the head would wait for the clock while the clock
+                    // waits for the earlier one.
+                    let at = part.queue.partition_point(|q| q.t <= b.t);
+                    part.queue.insert(at, *b);
                 }
             }
         }
@@ -336,22 +354,32 @@ pub async fn run(
     }
 }
 
-/// Keeps the newest clock snapshot at hand for the processing thread.
+/// Keeps the newest clock snapshot at hand for the processing thread; a
+/// watch that fails or ends (NATS away) is made again, and gives the
+/// newest snapshot first.
 async fn watch_clock(nats: Arc<Nats>, to_core: mpsc::Sender<ToCore>) -> Result<()> {
-    let mut watch =
-        nats.clock.watch_with_history("snapshot").await.context("cannot watch the clock snapshot")?;
-    while let Some(entry) = watch.next().await {
-        let entry = entry.context("clock snapshot watch")?;
-        match wire::decode::<SyncSnapshot>(&entry.value) {
-            Ok(s) => {
-                if to_core.send(ToCore::Clock(Arc::new(s))).is_err() {
+    loop {
+        let mut watch =
+            retry("watching the clock snapshot", || nats.clock.watch_with_history("snapshot")).await?;
+        while let Some(entry) = watch.next().await {
+            let entry = match entry {
+                Ok(e) => e,
+                Err(e) => {
+                    tracing::warn!(error = %e, "clock snapshot watch failed: watching again");
                     break;
                 }
+            };
+            match wire::decode::<SyncSnapshot>(&entry.value) {
+                Ok(s) => {
+                    if to_core.send(ToCore::Clock(Arc::new(s))).is_err() {
+                        return Ok(());
+                    }
+                }
+                Err(e) => tracing::warn!(error = %e, "clock snapshot unreadable: skipped"),
             }
-            Err(e) => tracing::warn!(error = %e, "clock snapshot unreadable: skipped"),
         }
+        tokio::time::sleep(Duration::from_millis(100)).await;
     }
-    Ok(())
 }
 
 /// Every receiver declared, in order, from the first.
@@ -368,20 +396,27 @@ async fn follow_receivers(nats: Arc<Nats>, to_core: mpsc::Sender<ToCore>) -> Res
 /// Batches whose results may be in flight at once (stored, not yet confirmed).
 const IN_FLIGHT: usize = 64;
 
-/// A batch's results sent, waiting for JetStream to confirm them.
-struct Storing {
-    events: PublishAckFuture,
-    sync: PublishAckFuture,
+/// A batch's results sent, waiting for JetStream to confirm them (none
+/// for a batch delivered again).
+struct Results {
+    stores: Option<(Storing, Storing)>,
     msg: Box<Message>,
 }
 
-impl Storing {
+impl Results {
     /// Confirmed stored: the batch is acknowledged (in order, so a
     /// consumer's floor never passes a batch whose results are not stored).
-    async fn settle(self) -> Result<()> {
-        self.events.await.context("JetStream did not store events")?;
-        self.sync.await.context("JetStream did not store sync notes")?;
-        self.msg.ack().await.map_err(|e| anyhow::anyhow!("ack: {e}"))
+    /// An acknowledgement lost with NATS is not tried again: the batch
+    /// comes again after `ack_wait`, and its sequence says it was done.
+    async fn settle(self, nats: &Nats) -> Result<()> {
+        if let Some((events, sync)) = self.stores {
+            events.stored(nats, "storing events").await?;
+            sync.stored(nats, "storing sync notes").await?;
+        }
+        if let Err(e) = self.msg.ack().await {
+            tracing::warn!(error = %e, "a frame batch's acknowledgement failed: it will come again");
+        }
+        Ok(())
     }
 }
 
@@ -391,7 +426,7 @@ async fn store_results(
     nats: Arc<Nats>,
     mut rx: tokio::sync::mpsc::UnboundedReceiver<FromCore>,
 ) -> Result<()> {
-    let mut pending: VecDeque<Storing> = VecDeque::new();
+    let mut pending: VecDeque<Results> = VecDeque::new();
     loop {
         let r = if pending.is_empty() {
             rx.recv().await
@@ -399,7 +434,7 @@ async fn store_results(
             match rx.try_recv() {
                 Ok(r) => Some(r),
                 Err(tokio::sync::mpsc::error::TryRecvError::Empty) => {
-                    pending.pop_front().expect("non-empty").settle().await?;
+                    pending.pop_front().expect("non-empty").settle(&nats).await?;
                     continue;
                 }
                 Err(tokio::sync::mpsc::error::TryRecvError::Disconnected) => None,
@@ -413,21 +448,23 @@ async fn store_results(
                     end,
                     &[(header::TIME, t), (header::FRAMES, frames as f64)],
                 );
-                let events = nats.js.publish_with_headers(nats.names.events(p), h, events.into()).await?;
+                let events = nats.send(nats.names.events(p), h, events.into()).await?;
                 let h = headers(&format!("s{p}-{seq}"), end, &[]);
-                let sync = nats.js.publish_with_headers(nats.names.sync(p), h, sync.into()).await?;
-                pending.push_back(Storing { events, sync, msg });
+                let sync = nats.send(nats.names.sync(p), h, sync.into()).await?;
+                pending.push_back(Results { stores: Some((events, sync)), msg });
                 if pending.len() >= IN_FLIGHT {
-                    pending.pop_front().expect("non-empty").settle().await?;
+                    pending.pop_front().expect("non-empty").settle(&nats).await?;
                 }
             }
+            FromCore::Redelivered(msg) => pending.push_back(Results { stores: None, msg }),
             FromCore::Checkpoint { p, bytes } => {
-                nats.checkpoints.put(p.to_string(), bytes.into()).await.context("checkpoint")?;
+                let bytes = bytes::Bytes::from(bytes);
+                retry("storing a checkpoint", || nats.checkpoints.put(p.to_string(), bytes.clone())).await?;
             }
         }
     }
     for s in pending {
-        s.settle().await?;
+        s.settle(&nats).await?;
     }
     Ok(())
 }
@@ -441,22 +478,34 @@ async fn claim_partitions(
 ) -> Result<()> {
     let every = Duration::from_secs_f64(cfg.lease_s / 3.0);
     // Registered a while before claiming, so that workers started together share evenly.
-    nats.workers.put(&id, id.clone().into()).await.context("cannot register the worker")?;
+    retry("registering the worker", || nats.workers.put(&id, id.clone().into())).await?;
     tokio::time::sleep(every * 2).await;
     let mut owned: HashMap<u32, (u64, tokio::sync::watch::Sender<bool>)> = HashMap::new();
     let mut tick = tokio::time::interval(every);
+    // After NATS was away, every claim and registration may have aged out
+    // on the server: two leases of quiet in which each worker takes back
+    // its own before any claims more (the first back would count itself
+    // alone and take every partition, the others' cores thrown away).
+    let (mut retries_seen, mut quiet_until) = (super::outage::retries(), tokio::time::Instant::now());
     loop {
         tick.tick().await;
-        nats.workers.put(&id, id.clone().into()).await.context("cannot renew the worker's registration")?;
+        retry("renewing the worker's registration", || nats.workers.put(&id, id.clone().into())).await?;
         let mut lost = Vec::new();
         for (&p, (rev, _)) in owned.iter_mut() {
-            match nats.claims.update(p.to_string(), id.clone().into(), *rev).await {
-                Ok(r) => *rev = r,
-                Err(e) => {
+            match tokio::time::timeout(super::outage::ATTEMPT, renew(&nats, p, &id, *rev)).await {
+                Ok(Ok(r)) => *rev = r,
+                Ok(Err(e)) => {
                     tracing::warn!(partition = p, error = %e, "partition claim lost");
                     lost.push(p);
                 }
+                // No answer is not a refusal: kept, and renewed next time
+                // (or found taken then).
+                Err(_) => super::outage::count_retry(),
             }
+        }
+        if super::outage::retries() != retries_seen {
+            retries_seen = super::outage::retries();
+            quiet_until = tokio::time::Instant::now() + Duration::from_secs_f64(2.0 * cfg.lease_s);
         }
         for p in lost {
             if let Some((_, stop)) = owned.remove(&p) {
@@ -464,7 +513,10 @@ async fn claim_partitions(
             }
             let _ = to_core.send(ToCore::Drop(p));
         }
-        let live = count_keys(&nats.workers).await?.max(1) as u32;
+        if tokio::time::Instant::now() < quiet_until {
+            continue;
+        }
+        let live = retry("listing the workers", || count_keys(&nats.workers)).await?.max(1) as u32;
         let share = cfg.partitions.div_ceil(live) as usize;
         for p in 0..cfg.partitions {
             if owned.len() >= share {
@@ -483,6 +535,30 @@ async fn claim_partitions(
                 tokio::spawn(keep_consuming(nats.clone(), cfg.clone(), p, to_core.clone(), stop_rx));
                 owned.insert(p, (rev, stop_tx));
                 tracing::info!(partition = p, worker = %id, "partition claimed");
+            }
+        }
+    }
+}
+
+/// A claim renewed at its revision; or, when it has aged out on the server
+/// (NATS away longer than the lease) and nobody took it meanwhile, made
+/// again, so the partition keeps its worker and its tracks.
+async fn renew(nats: &Nats, p: u32, id: &str, rev: u64) -> Result<u64> {
+    match nats.claims.update(p.to_string(), id.to_string().into(), rev).await {
+        Ok(r) => Ok(r),
+        Err(e) => {
+            let entry = nats.claims.entry(p.to_string()).await.ok().flatten();
+            match entry {
+                // Aged out (or deleted): nobody holds it.
+                None => Ok(nats.claims.create(p.to_string(), id.to_string().into()).await?),
+                Some(en) if en.operation != kv::Operation::Put => {
+                    Ok(nats.claims.create(p.to_string(), id.to_string().into()).await?)
+                }
+                // Still ours, at a revision the server kept (one from before it restarted).
+                Some(en) if en.value.as_ref() == id.as_bytes() => {
+                    Ok(nats.claims.update(p.to_string(), id.to_string().into(), en.revision).await?)
+                }
+                Some(_) => Err(e.into()),
             }
         }
     }
@@ -547,16 +623,23 @@ async fn consume(
             filter_subject: nats.names.frames(p),
             ack_policy: AckPolicy::Explicit,
             ack_wait: Duration::from_secs_f64(cfg.lease_s * 10.0),
-            max_ack_pending: 64,
+            // Beyond the ingest's publications in flight: a batch that
+            // NATS lost and the ingest sent again comes after that many
+            // later ones, which wait for it unacknowledged.
+            max_ack_pending: 1024,
             deliver_policy,
             ..Default::default()
         })
         .await
         .with_context(|| format!("cannot consume partition {p}"))?;
-    let mut msgs = consumer.messages().await?;
+    let mut msgs = super::outage::pulls(&consumer).await?;
     loop {
         tokio::select! {
-            _ = stop.changed() => return Ok(()),
+            // Told already (the claim lost while this consumer was being
+            // made) counts too: `changed` waits for the next telling, and
+            // a consumer left running after its claim went to another
+            // worker fought that worker's consumer for the partition.
+            _ = async { stop.wait_for(|stopped| *stopped).await.is_ok() } => return Ok(()),
             m = msgs.next() => {
                 let Some(m) = m else { return Ok(()) };
                 let m = m.map_err(|e| anyhow::anyhow!("partition {p}: {e}"))?;
