@@ -508,3 +508,34 @@ async fn wait(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A batch that comes after a later one of its partition (sent again
+    /// after an outage) is taken once; a replay after a takeover, or one
+    /// older than the window, is not; the common time waits for the
+    /// partition furthest behind and passes one that ended.
+    #[test]
+    fn watermarks_take_a_late_batch_once_and_refuse_replays() {
+        let mut w = Watermarks::new(2);
+        assert_eq!(w.mark(0, 100.0, false), Mark::New);
+        assert_eq!(w.mark(0, 100.2, false), Mark::New);
+        assert_eq!(w.mark(0, 100.1, false), Mark::New, "late, never taken");
+        assert_eq!(w.mark(0, 100.1, false), Mark::Replayed, "taken already");
+        assert_eq!(w.mark(0, 100.2 - REORDER_WINDOW_S - 1.0, false), Mark::Replayed, "older than the window");
+        assert_eq!(w.mark(5, 100.0, false), Mark::Unknown);
+        assert_eq!(w.common(), f64::NEG_INFINITY, "partition 1 not heard yet");
+        assert_eq!(w.mark(1, 50.0, false), Mark::New);
+        assert_eq!(w.common(), 50.0);
+        assert_eq!(w.mark(1, 60.0, true), Mark::New);
+        assert_eq!(w.common(), 100.2, "an ended partition holds nobody back");
+        assert!(!w.all_ended());
+        // The remembered times stay within the window.
+        for k in 1..2000 {
+            w.mark(0, 100.2 + k as f64 * 0.1, false);
+        }
+        assert!(w.taken[0].len() <= (REORDER_WINDOW_S / 0.1) as usize + 2, "{}", w.taken[0].len());
+    }
+}
