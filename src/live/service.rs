@@ -94,7 +94,8 @@ async fn stop_inputs(inputs: Tasks) {
 
 /// The counters of a service run in-process, for whoever started it (a
 /// test, a program embedding the service): its [`Registry`] of receivers
-/// with their counters, there once [`serve_counted`] has made it. The stats
+/// with their counters, there once [`serve_counted`] is running (its
+/// receivers declared, its inputs' ports bound). The stats
 /// line and Prometheus read the same atomics, so a test reading these reads
 /// what an operator sees, typed, without parsing the log.
 #[derive(Clone, Default)]
@@ -130,8 +131,6 @@ pub async fn serve_counted(
     let ingest_only = matches!(sink, Some(Sink::Cluster(..)));
     let cfg = for_sink(cfg, ingest_only);
     let registry = Arc::new(Registry { queue_frames: cfg.service.queue_frames, ..Default::default() });
-    // A service is started once per `Counters`: a second start keeps the first's.
-    let _ = counters.0.set(registry.clone());
     // Everything but the inputs stops at the end (a reload replaces those).
     let mut rest = Tasks::default();
     let web = start_http(&cfg, &registry, &mut rest).await?;
@@ -164,6 +163,10 @@ pub async fn serve_counted(
     let core_thread = start_sink(sink, &core_cfg, setup, &tx, rx)?;
 
     let running = start_inputs(&cfg.input, bound, &tx, &registry);
+    // Handed out once the receivers are in it and the inputs' ports bound:
+    // a caller that reads it may send at once. (One start per `Counters`:
+    // a second keeps the first's.)
+    let _ = counters.0.set(registry.clone());
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
     tracing::info!(
         inputs = cfg.input.len(),
