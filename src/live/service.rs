@@ -95,9 +95,9 @@ async fn stop_inputs(inputs: Tasks) {
 /// The counters of a service run in-process, for whoever started it (a
 /// test, a program embedding the service): its [`Registry`] of receivers
 /// with their counters, there once [`serve_counted`] is running (its
-/// receivers declared, its inputs' ports bound). The stats
-/// line and Prometheus read the same atomics, so a test reading these reads
-/// what an operator sees, typed, without parsing the log.
+/// receivers declared, its inputs' ports bound). The stats line and
+/// Prometheus read the same atomics, so a test reading these reads what an
+/// operator sees, typed, without parsing the log.
 #[derive(Clone, Default)]
 pub struct Counters(Arc<OnceLock<Arc<Registry>>>);
 
