@@ -493,14 +493,14 @@ async fn claim_partitions(
         let mut lost = Vec::new();
         for (&p, (rev, _)) in owned.iter_mut() {
             match tokio::time::timeout(super::outage::ATTEMPT, renew(&nats, p, &id, *rev)).await {
-                Ok(Ok(r)) => *rev = r,
+                Ok(Ok(Some(r))) => *rev = r,
                 Ok(Err(e)) => {
                     tracing::warn!(partition = p, error = %e, "partition claim lost");
                     lost.push(p);
                 }
                 // No answer is not a refusal: kept, and renewed next time
                 // (or found taken then).
-                Err(_) => super::outage::count_retry(),
+                Ok(Ok(None)) | Err(_) => super::outage::count_retry(),
             }
         }
         if super::outage::retries() != retries_seen {
@@ -542,25 +542,22 @@ async fn claim_partitions(
 
 /// A claim renewed at its revision; or, when it has aged out on the server
 /// (NATS away longer than the lease) and nobody took it meanwhile, made
-/// again, so the partition keeps its worker and its tracks.
-async fn renew(nats: &Nats, p: u32, id: &str, rev: u64) -> Result<u64> {
-    match nats.claims.update(p.to_string(), id.to_string().into(), rev).await {
-        Ok(r) => Ok(r),
-        Err(e) => {
-            let entry = nats.claims.entry(p.to_string()).await.ok().flatten();
-            match entry {
-                // Aged out (or deleted): nobody holds it.
-                None => Ok(nats.claims.create(p.to_string(), id.to_string().into()).await?),
-                Some(en) if en.operation != kv::Operation::Put => {
-                    Ok(nats.claims.create(p.to_string(), id.to_string().into()).await?)
-                }
-                // Still ours, at a revision the server kept (one from before it restarted).
-                Some(en) if en.value.as_ref() == id.as_bytes() => {
-                    Ok(nats.claims.update(p.to_string(), id.to_string().into(), en.revision).await?)
-                }
-                Some(_) => Err(e.into()),
-            }
+/// again, so the partition keeps its worker and its tracks. `None` when
+/// NATS could not say who holds it: kept, and renewed next time.
+async fn renew(nats: &Nats, p: u32, id: &str, rev: u64) -> Result<Option<u64>> {
+    let refused = match nats.claims.update(p.to_string(), id.to_string().into(), rev).await {
+        Ok(r) => return Ok(Some(r)),
+        Err(e) => e,
+    };
+    let Ok(entry) = nats.claims.entry(p.to_string()).await else { return Ok(None) };
+    match entry.filter(|en| en.operation == kv::Operation::Put) {
+        // Aged out (or deleted): nobody holds it.
+        None => Ok(Some(nats.claims.create(p.to_string(), id.to_string().into()).await?)),
+        // Still ours, at a revision the server kept (one from before it restarted).
+        Some(en) if en.value.as_ref() == id.as_bytes() => {
+            Ok(Some(nats.claims.update(p.to_string(), id.to_string().into(), en.revision).await?))
         }
+        Some(_) => Err(refused.into()),
     }
 }
 
