@@ -344,10 +344,33 @@ fn receivers_reported(single: &Path, cluster: &Path, name: &str) {
             "{name} {id}: one node {}/{:?}/{:?}, cluster {}/{:?}/{:?}",
             a["state"], a["sigma_ns"], a["outlier_rate"], b["state"], b["sigma_ns"], b["outlier_rate"]
         );
+        assert_eq!((&a["state"], &a["reason"]), (&b["state"], &b["reason"]), "{name} {id}");
+        // The position survey, one for the network from every worker's
+        // traffic: where one node finds the receiver, within a few of its
+        // sigmas.
+        let offset = |v: &serde_json::Value| {
+            let en = v["position_offset_en_m"].as_array()?;
+            Some(([en[0].as_f64()?, en[1].as_f64()?], v["position_offset_sigma_m"].as_f64()?))
+        };
+        match (offset(a), offset(b)) {
+            (Some((e1, s1)), Some((e, s))) => {
+                let apart = (e[0] - e1[0]).hypot(e[1] - e1[1]);
+                eprintln!("{name} {id}: surveyed {e1:.1?} ±{s1:.1} m, cluster {e:.1?} ±{s:.1} m");
+                assert!(
+                    apart <= (4.0 * s1.hypot(s)).max(5.0),
+                    "{name} {id}: surveyed {apart:.1} m from one node's"
+                );
+            }
+            // Surveyed by one and not yet by the other, at the survey's
+            // threshold of traffic; never a misplaced receiver.
+            (one, many) => {
+                eprintln!("{name} {id}: surveyed {one:?} by one node, {many:?} by the cluster");
+                assert!(a["reason"] != "misplaced", "{name} {id}: offsets {one:?} and {many:?}")
+            }
+        }
         if a["reason"] == "misplaced" {
             continue;
         }
-        assert_eq!(a["state"], b["state"], "{name} {id}");
         let (s1, s) = (a["sigma_ns"].as_f64().unwrap(), b["sigma_ns"].as_f64().unwrap());
         assert!((s / s1 - 1.0).abs() <= 0.25, "{name} {id}: sigma {s} ns, one node {s1} ns");
     }
@@ -454,6 +477,7 @@ fn a_cluster_of_processes_tracks_as_one_node_does_and_survives_a_killed_worker()
             within(updates, node_updates as f64, 0.02),
             "{name}: {updates} pair updates, one node {node_updates}"
         );
+        receivers_reported(&single, &run.output, name);
         // The same aircraft tracked, as well.
         let (ids1, ids) = (track_ids(&single), track_ids(&run.output));
         assert_eq!(ids1.keys().collect::<BTreeSet<_>>(), ids.keys().collect::<BTreeSet<_>>(), "{name}");
@@ -470,7 +494,6 @@ fn a_cluster_of_processes_tracks_as_one_node_does_and_survives_a_killed_worker()
             );
         }
         alerts_covered(&single, &run.output);
-        receivers_reported(&single, &run.output, name);
         // No aircraft changes track number (takeovers included).
         for (hex, v) in &ids {
             let numbers: BTreeSet<u64> = v.iter().map(|x| x.1).collect();

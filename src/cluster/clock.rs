@@ -47,9 +47,11 @@ pub struct Merger {
 }
 
 impl Merger {
-    pub fn new(partitions: u32, params: PairParams) -> Self {
+    /// `self_survey`: the configuration's, for what the receiver records
+    /// say of a misplaced receiver.
+    pub fn new(partitions: u32, params: PairParams, self_survey: bool) -> Self {
         Merger {
-            clock: SharedClock::new(ClockSync::new(params)),
+            clock: SharedClock::new(ClockSync::new(params), self_survey),
             marks: Watermarks::new(partitions),
             waiting: Vec::new(),
             arrivals: 0,
@@ -102,7 +104,7 @@ impl Merger {
 }
 
 pub async fn run(nats: &Nats, cfg: &ClusterConfig, mlat: &crate::mlat::MlatConfig) -> Result<ClockStats> {
-    let mut merger = Merger::new(cfg.partitions, crate::mlat::engine::pair_params(mlat));
+    let mut merger = Merger::new(cfg.partitions, crate::mlat::engine::pair_params(mlat), mlat.self_survey);
     // The receivers, in declaration order, before notes name them.
     let mut declared = nats.receiver_declarations().await?;
     let name = format!("{}-clock", cfg.name);
@@ -208,7 +210,7 @@ mod tests {
 
     #[test]
     fn notes_wait_for_every_partition_and_apply_in_time_order_once() {
-        let mut m = Merger::new(2, PairParams::default());
+        let mut m = Merger::new(2, PairParams::default(), false);
         let prior = crate::mlat::timing::TimingModel::prior(50e-9);
         m.clock.add_receiver(ClockKind::Gps, "a", prior);
         m.clock.add_receiver(ClockKind::Beast12, "b", prior);

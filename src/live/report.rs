@@ -37,6 +37,9 @@ pub(super) fn front_metrics(
     // early at its fix, solved again with each copy left out in turn.
     metrics::counter!("fuse1090_mlat_refixed_total").absolute(m.refixed);
     metrics::counter!("fuse1090_mlat_gps_time_jumps_total").absolute(m.time_jumps);
+    // Copies kept out of the position surveys, their times beyond any
+    // receiver's fault.
+    metrics::counter!("fuse1090_mlat_survey_outliers_total").absolute(m.survey_gross);
     // Transmissions that gave no fix, per reason (every reason, zeros too,
     // so that a dashboard has each series from the start).
     for (why, n) in m.rejects.iter() {

@@ -19,6 +19,8 @@
 use serde::{Deserialize, Serialize};
 
 use super::clock::PairFilter;
+use super::state::SurveySnapshot;
+use super::survey::Survey;
 use super::sync::{ClockSync, LocalCopy, Reference, RxHealth, SyncStats};
 use super::timing::{learn_residuals, Residual, TimingModel};
 use crate::feed::capture::ClockKind;
@@ -59,6 +61,18 @@ pub enum SyncNote {
     /// A fix's lessons for its receivers' timing models; `anchored` when
     /// the fix had a receiver whose timing the configuration gives.
     Timing { now: f64, residuals: Vec<Residual>, anchored: bool },
+    /// An ADS-B position's lessons for its receivers' position surveys.
+    Survey { now: f64, rows: Vec<SurveyRow> },
+}
+
+/// One receiver's excess range at one ADS-B position, as its survey takes it
+/// ([`Survey::add`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SurveyRow {
+    pub rx: u32,
+    pub u_enu: [f64; 3],
+    pub d_m: f64,
+    pub var_m2: f64,
 }
 
 impl SyncNote {
@@ -67,7 +81,8 @@ impl SyncNote {
             SyncNote::Observed { now, .. }
             | SyncNote::ResetReceiver { now, .. }
             | SyncNote::ResetPairs { now, .. }
-            | SyncNote::Timing { now, .. } => *now,
+            | SyncNote::Timing { now, .. }
+            | SyncNote::Survey { now, .. } => *now,
         }
     }
 }
@@ -83,6 +98,9 @@ pub struct SyncSnapshot {
     pub stats: SyncStats,
     /// Each receiver's learnt timing.
     pub timing: Vec<TimingModel>,
+    /// Each receiver's position survey, from every worker's ADS-B traffic.
+    #[serde(default)]
+    pub surveys: Vec<SurveySnapshot>,
 }
 
 /// How the clock service treated a note.
@@ -95,35 +113,53 @@ pub enum Applied {
     UnknownReceiver,
 }
 
-/// The clock service's side: the one [`ClockSync`] and when each receiver was last reset.
+/// The clock service's side: the one [`ClockSync`], the receivers' timing
+/// models and position surveys, and when each receiver was last reset.
 pub struct SharedClock {
     pub sync: ClockSync,
     pub timing: Vec<TimingModel>,
+    pub surveys: Vec<Survey>,
+    /// Misplaced receivers are used where their surveys put them
+    /// (`self_survey`), not left out.
+    self_survey: bool,
     last_reset: Vec<f64>,
 }
 
 impl SharedClock {
-    pub fn new(sync: ClockSync) -> Self {
-        SharedClock { sync, timing: Vec::new(), last_reset: Vec::new() }
+    pub fn new(sync: ClockSync, self_survey: bool) -> Self {
+        SharedClock { sync, timing: Vec::new(), surveys: Vec::new(), self_survey, last_reset: Vec::new() }
     }
 
     /// A receiver, its timing model starting from `prior` (the configured jitter's).
     pub fn add_receiver(&mut self, clock: ClockKind, id: &str, prior: TimingModel) {
         self.sync.add_receiver(clock, id);
         self.timing.push(prior);
+        self.surveys.push(Survey::default());
         self.last_reset.push(f64::NEG_INFINITY);
     }
 
-    /// Every receiver's report at `t` as the whole network's clock and
-    /// timing models say (the workers' position surveys are not here).
+    /// Every receiver's report at `t` as the whole network's clock, timing
+    /// models and position surveys say (a receiver whose time jumps is
+    /// each worker's to see: its copies never leave the worker).
     pub fn receiver_reports(&self, t: f64) -> Vec<crate::mlat::ReceiverReport> {
         use crate::mlat::engine::{gps_mean_offset, timing_report};
+        use crate::mlat::Exclusion;
         let gps_mean = gps_mean_offset(self.sync.clocks.iter().copied().zip(&self.timing));
         (0..self.receivers())
             .map(|rx| {
                 let h = &self.sync.health[rx];
-                let reason = h.excluded.then_some(crate::mlat::Exclusion::SyncFailing);
-                timing_report(rx, t, reason, h, self.sync.clocks[rx], &self.timing[rx], gps_mean)
+                let offset = self.surveys[rx].offset();
+                let misplaced = !self.self_survey && offset.is_some_and(|o| o.misplaced());
+                let reason = if misplaced {
+                    Some(Exclusion::Misplaced)
+                } else {
+                    h.excluded.then_some(Exclusion::SyncFailing)
+                };
+                let mut report =
+                    timing_report(rx, t, reason, h, self.sync.clocks[rx], &self.timing[rx], gps_mean);
+                report.position_offset_en_m = offset.map(|o| [o.enu_m[0], o.enu_m[1]]);
+                report.position_offset_sigma_m = offset.map(|o| o.sigma_m);
+                report
             })
             .collect()
     }
@@ -151,6 +187,15 @@ impl SharedClock {
                 }
                 for rx in learn_residuals(residuals, *anchored, &mut self.timing) {
                     self.sync.set_gps_bias(rx, self.timing[rx].offset());
+                }
+                Applied::Applied
+            }
+            SyncNote::Survey { rows, .. } => {
+                if rows.iter().any(|r| r.rx as usize >= n) {
+                    return Applied::UnknownReceiver;
+                }
+                for r in rows {
+                    self.surveys[r.rx as usize].add(r.u_enu, r.d_m, r.var_m2);
                 }
                 Applied::Applied
             }
@@ -184,6 +229,7 @@ impl SharedClock {
             references: self.sync.references.clone(),
             stats: self.sync.stats,
             timing: self.timing.clone(),
+            surveys: self.surveys.iter().map(Survey::snapshot).collect(),
         }
     }
 }
@@ -233,7 +279,7 @@ mod tests {
 
     fn network() -> (ClockSync, SharedClock) {
         let mut local = ClockSync::new(PairParams::default());
-        let mut service = SharedClock::new(ClockSync::new(PairParams::default()));
+        let mut service = SharedClock::new(ClockSync::new(PairParams::default()), false);
         for (k, kind) in [ClockKind::Gps, ClockKind::Beast12, ClockKind::Beast12].into_iter().enumerate() {
             local.add_receiver(kind, &format!("r{k}"));
             service.add_receiver(kind, &format!("r{k}"), TimingModel::prior(50e-9));
@@ -303,6 +349,48 @@ mod tests {
         assert_eq!(service.sync.pairs().count(), 1, "only the pair without receiver 1 is left");
         assert_eq!(service.sync.health[1].clock_resets, 1);
         assert_eq!(service.apply(&SyncNote::ResetPairs { now: 1003.0, rx: 7 }), Applied::UnknownReceiver);
+    }
+
+    /// A receiver 150 m east and 90 m south of where it is declared, heard
+    /// with aircraft all round: the excess ranges its survey takes.
+    fn survey_rows(k: usize) -> Vec<SurveyRow> {
+        let (az, el) = ((k as f64 * 0.7).sin_cos(), (k as f64 * 0.3).sin().abs() * 0.2);
+        let u_enu = [az.0 * (1.0 - el * el).sqrt(), az.1 * (1.0 - el * el).sqrt(), -el];
+        let d_m = 150.0 * u_enu[0] - 90.0 * u_enu[1] + 40.0 + [3.0, -3.0][k % 2];
+        vec![SurveyRow { rx: 2, u_enu, d_m, var_m2: 100.0 }]
+    }
+
+    #[test]
+    fn the_services_survey_of_every_workers_traffic_places_a_misplaced_receiver() {
+        for self_survey in [false, true] {
+            let mut service = SharedClock::new(ClockSync::new(PairParams::default()), self_survey);
+            for k in 0..3 {
+                service.add_receiver(ClockKind::Gps, &format!("r{k}"), TimingModel::prior(50e-9));
+            }
+            let mut one = Survey::default();
+            for k in 0..600 {
+                // Two workers' notes, each with part of the traffic.
+                let note = SyncNote::Survey { now: 1000.0 + k as f64, rows: survey_rows(k) };
+                assert_eq!(service.apply(&note), Applied::Applied);
+                for r in survey_rows(k) {
+                    one.add(r.u_enu, r.d_m, r.var_m2);
+                }
+            }
+            assert_eq!(service.surveys[2], one, "one survey of all the notes");
+            let report = &service.receiver_reports(1600.0)[2];
+            let [e, n] = report.position_offset_en_m.expect("surveyed");
+            assert!((e - 150.0).abs() < 2.0 && (n + 90.0).abs() < 2.0, "{e} {n}");
+            // Left out as one node leaves it out, or used where it is.
+            let want = (!self_survey).then_some(crate::mlat::Exclusion::Misplaced);
+            assert_eq!(report.reason, want);
+            assert_eq!(service.receiver_reports(1600.0)[1].position_offset_en_m, None, "never heard");
+            let snapshot = service.snapshot(1600.0);
+            assert_eq!(Survey::from_snapshot(&snapshot.surveys[2]).as_ref(), Some(&one));
+        }
+        let mut service = SharedClock::new(ClockSync::new(PairParams::default()), false);
+        service.add_receiver(ClockKind::Gps, "r0", TimingModel::prior(50e-9));
+        let note = SyncNote::Survey { now: 1.0, rows: survey_rows(0) };
+        assert_eq!(service.apply(&note), Applied::UnknownReceiver);
     }
 
     #[test]

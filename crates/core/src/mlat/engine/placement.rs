@@ -7,12 +7,17 @@
 use super::{GroupVec, LocalCopy, Mlat, SURVEY_CHECK_EVERY};
 use crate::feed::capture::ClockKind;
 use crate::geo::{ecef_distance, geodetic_to_ecef};
+use crate::mlat::shared::{SurveyRow, SyncNote};
 use crate::mlat::solver::C_AIR;
 
 /// The surveyed position in use follows the survey once it moves by more
 /// than this many of its sigmas, and at least this far (m).
 const FOLLOW_SIGMAS: f64 = 2.0;
 const FOLLOW_FLOOR_M: f64 = 1.0;
+/// A copy whose emission time is this far (s) from the group's median is
+/// no survey's measurement: 300 km, beyond any receiver's range, where a
+/// misplaced position or a clock's offset moves it by microseconds.
+const SURVEY_GROSS_S: f64 = 1e-3;
 
 impl Mlat {
     /// One ADS-B position, multilaterated: each receiver's range excess
@@ -50,6 +55,20 @@ impl Mlat {
             // is no one's reference.
             emitted.push((c.rx, raw, corrected, w, !self.out_of_fixes(c.rx)));
         }
+        // A copy whose time puts the emission further from the others' than
+        // any position or timing fault can (a counter converted through
+        // pairs from before its restart: in a cluster, until the clock
+        // service has applied the restart) would be one measurement tens of
+        // kilometres off in its own survey and, through the reference, in
+        // every other's, never forgotten: left out, and counted.
+        let mut mid: GroupVec<f64> = emitted.iter().filter(|x| x.4).map(|x| x.2).collect();
+        mid.sort_unstable_by(f64::total_cmp);
+        if let Some(&median) = mid.get(mid.len() / 2) {
+            let before = emitted.len();
+            emitted.retain(|x| (x.2 - median).abs() <= SURVEY_GROSS_S);
+            self.stats.survey_gross += (before - emitted.len()) as u64;
+        }
+        let mut rows: Vec<SurveyRow> = Vec::new();
         let (sw, swe) = (emitted.iter())
             .filter(|x| x.4)
             .fold((0.0, 0.0), |(sw, swe), &(_, _, corrected, w, _)| (sw + w, swe + w * corrected));
@@ -75,14 +94,30 @@ impl Mlat {
             // Timing (its own and the others'), and the ADS-B position's
             // error, which moves its range and the others' differently.
             let var = C_AIR * C_AIR * (1.0 / w + 1.0 / w_others) + 2.0 * sigma_a * sigma_a;
-            self.rxs[rx].survey.add(u_enu, C_AIR * (e - t_emit), var);
-            if self.rxs[rx].survey.count() % SURVEY_CHECK_EVERY == 0 {
-                if self.cfg.self_survey {
-                    self.apply_survey(rx, now);
-                } else {
-                    self.judge_position(rx);
-                }
+            let d_m = C_AIR * (e - t_emit);
+            // In a cluster the survey is the clock service's, from every
+            // worker's traffic, and comes back with its snapshots.
+            if self.shared.is_some() {
+                rows.push(SurveyRow { rx: rx as u32, u_enu, d_m, var_m2: var });
+                continue;
             }
+            self.rxs[rx].survey.add(u_enu, d_m, var);
+            if self.rxs[rx].survey.count() % SURVEY_CHECK_EVERY == 0 {
+                self.place(rx, now);
+            }
+        }
+        if !rows.is_empty() {
+            self.note_sync(SyncNote::Survey { now, rows });
+        }
+    }
+
+    /// What receiver `rx`'s survey says is done: with `self_survey` it is
+    /// used where the survey puts it, without it left out if misplaced.
+    pub(super) fn place(&mut self, rx: usize, now: f64) {
+        if self.cfg.self_survey {
+            self.apply_survey(rx, now);
+        } else {
+            self.judge_position(rx);
         }
     }
 

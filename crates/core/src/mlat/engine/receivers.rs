@@ -195,7 +195,7 @@ impl Mlat {
         format!(
             "mlat: {} fixes from {} groups; pairs {valid}/{total} valid; sync residual ns [{}]; rejects [{}]; \
              excluded [{}]; misplaced [{}]; sync messages {}, pair updates {}, outliers {}, restarts {}; \
-             GPS time jumps {}; self-synchronised fixes {}",
+             GPS time jumps {}; self-synchronised fixes {}; survey outliers {}",
             self.stats.fixes,
             self.stats.groups,
             residuals.join(" "),
@@ -207,7 +207,8 @@ impl Mlat {
             self.sync.stats.outliers,
             self.sync.stats.restarts,
             self.stats.time_jumps,
-            self.stats.self_synced_fixes
+            self.stats.self_synced_fixes,
+            self.stats.survey_gross
         )
     }
 }

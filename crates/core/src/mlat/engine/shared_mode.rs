@@ -48,14 +48,23 @@ impl Mlat {
     }
 
     /// The clock service's state, in place of this engine's own: the clock
-    /// pairs, and the receivers' timing models (but those the configuration
-    /// gives).
+    /// pairs, the receivers' timing models (but those the configuration
+    /// gives) and their position surveys, each receiver then placed as its
+    /// survey says (left out if misplaced, or moved with `self_survey`), as
+    /// every other worker places it.
     pub fn load_sync(&mut self, snapshot: &SyncSnapshot) {
         self.sync.load_snapshot(snapshot);
         for (rx, model) in snapshot.timing.iter().enumerate().take(self.rxs.len()) {
             if !self.rxs[rx].timing_known {
                 self.rxs[rx].timing = *model;
                 self.sync.set_gps_bias(rx, self.rxs[rx].bias());
+            }
+        }
+        for (rx, survey) in snapshot.surveys.iter().enumerate().take(self.rxs.len()) {
+            let Some(survey) = Survey::from_snapshot(survey) else { continue };
+            if survey != self.rxs[rx].survey {
+                self.rxs[rx].survey = survey;
+                self.place(rx, snapshot.t);
             }
         }
     }

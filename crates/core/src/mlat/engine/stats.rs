@@ -22,6 +22,10 @@ pub struct MlatStats {
     /// GPS-timed copies whose time disagreed with the others' by more than
     /// light takes (see `drop_gps_time_jumps`).
     pub time_jumps: u64,
+    /// Copies left out of the receivers' position surveys, their emission
+    /// times too far from the others' to be any receiver's fault (see
+    /// `survey_from`).
+    pub survey_gross: u64,
     /// Aircraft currently not trusted as sync sources, and the positions refused.
     pub sync_banned_aircraft: u64,
     pub sync_refused: u64,

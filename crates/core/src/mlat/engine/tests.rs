@@ -400,3 +400,91 @@ fn learnt_state_survives_a_restart_but_not_a_move() {
     std::fs::write(&path, r#"{"version":99,"saved_unix":0,"receivers":[]}"#).unwrap();
     assert!(LearntState::load(&path).unwrap_err().contains("version 99"));
 }
+
+/// Workers of a cluster each see part of the ADS-B traffic; the clock
+/// service surveys the receivers from all of it, and every worker places a
+/// misplaced one as one node would (here r2, 200 m east of where it is
+/// declared): left out, or with `self_survey` used where it is.
+#[test]
+fn workers_place_a_misplaced_receiver_by_the_services_survey() {
+    for self_survey in [false, true] {
+        let declared = receivers();
+        let mut actual = declared.clone();
+        actual[2].lon += 200.0 / (111_320.0 * 48.6f64.to_radians().cos());
+        let mut workers: Vec<Mlat> = (0..2)
+            .map(|_| {
+                let mut m = Mlat::new(MlatConfig { self_survey, ..MlatConfig::default() });
+                for r in &declared {
+                    m.add_receiver(r);
+                }
+                m.share_sync();
+                m
+            })
+            .collect();
+        let mut service =
+            crate::mlat::shared::SharedClock::new(ClockSync::new(PairParams::default()), self_survey);
+        for r in &declared {
+            service.add_receiver(r.clock, &r.id, TimingModel::prior(50e-9));
+        }
+        let t0 = 1_700_000_000.0;
+        for k in 0..1200 {
+            let (lat, lon) = (48.45 + 0.04 * (k % 17) as f64, 1.95 + 0.05 * (k % 19) as f64);
+            let target = geodetic_to_ecef(lat, lon, 30_000.0 * FT_TO_M);
+            let mut g = group(&actual, target, t0 + k as f64);
+            g.info.adsb_ecef = Some(target);
+            g.info.adsb_sigma_m = 10.0;
+            let w = &mut workers[k % 2];
+            w.on_group(&g, t0 + k as f64 + 0.2);
+            for note in w.take_sync_notes() {
+                service.apply(&note);
+            }
+            if k % 50 == 49 {
+                let snapshot = service.snapshot(t0 + k as f64);
+                for w in &mut workers {
+                    w.load_sync(&snapshot);
+                }
+            }
+        }
+        let t = t0 + 1200.0;
+        let surveyed = service.receiver_reports(t)[2].position_offset_en_m;
+        let [e, n] = surveyed.expect("surveyed by the service");
+        assert!((e - 200.0).abs() < 10.0 && n.abs() < 10.0, "surveyed {e:.1} east, {n:.1} north");
+        for (k, w) in workers.iter().enumerate() {
+            let report = w.receiver_report(2, t);
+            let want = (!self_survey).then_some(crate::mlat::Exclusion::Misplaced);
+            assert_eq!(report.reason, want, "worker {k}: {report:?}");
+            assert_eq!(report.position_offset_en_m, surveyed, "worker {k}");
+            // Used, it is where the survey puts it.
+            let moved = ecef_distance(w.rxs[2].ecef, w.rxs[2].declared_ecef);
+            assert!(if self_survey { (moved - 200.0).abs() < 10.0 } else { moved == 0.0 }, "{moved} m");
+            assert_eq!(w.receiver_report(1, t).reason, None, "worker {k}");
+        }
+    }
+}
+
+/// A copy whose time is milliseconds off the others' (more than light takes
+/// across any receiver's range) is no position error: kept out of every
+/// receiver's survey, and counted, so the honest ones stay where declared.
+#[test]
+fn a_copy_milliseconds_off_is_kept_out_of_the_surveys() {
+    let (mut m, rxs) = engine();
+    let t0 = 1_700_000_000.0;
+    for k in 0..600 {
+        let (lat, lon) = (48.45 + 0.04 * (k % 17) as f64, 1.95 + 0.05 * (k % 19) as f64);
+        let target = geodetic_to_ecef(lat, lon, 30_000.0 * FT_TO_M);
+        let mut g = group(&rxs, target, t0 + k as f64);
+        g.info.adsb_ecef = Some(target);
+        g.info.adsb_sigma_m = 10.0;
+        if k % 10 == 0 {
+            delay(&mut g.copies[3], 5e-3);
+        }
+        m.on_group(&g, t0 + k as f64 + 0.2);
+    }
+    assert_eq!(m.stats.survey_gross, 60);
+    for rx in 0..rxs.len() {
+        let r = m.receiver_report(rx, t0 + 600.0);
+        let [e, n] = r.position_offset_en_m.expect("surveyed");
+        assert!(e.hypot(n) < 5.0, "rx {rx}: {e:.1} east, {n:.1} north");
+        assert_eq!(r.reason, None, "rx {rx}");
+    }
+}
