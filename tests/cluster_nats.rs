@@ -766,3 +766,43 @@ fn fix_against_adsb(path: &Path) -> (f64, usize) {
     d.sort_by(f64::total_cmp);
     (d.get(d.len() / 2).copied().unwrap_or(f64::INFINITY), d.len())
 }
+
+/// The receivers' declarations are never aged out (their order numbers the
+/// receivers, and a role started later reads them all): a stream an earlier
+/// version made with an hour's limit has it lifted when a role connects,
+/// and a full one refuses a new declaration instead of dropping the first.
+#[test]
+fn the_receiver_declarations_are_kept_for_good() {
+    use async_nats::jetstream::stream::{Config, DiscardPolicy};
+    let Some(server) = nats_server() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let nats = NatsServer::start(&server, dir.path());
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    rt.block_on(async {
+        let client = async_nats::connect(format!("127.0.0.1:{}", nats.port)).await.unwrap();
+        let js = async_nats::jetstream::new(client);
+        let old = Config {
+            name: "OLD_RECEIVERS".into(),
+            subjects: vec!["old.receivers".into()],
+            max_age: Duration::from_secs(3600),
+            ..Default::default()
+        };
+        js.create_stream(old).await.unwrap();
+        let cfg = fuse1090::cluster::ClusterConfig {
+            url: format!("nats://127.0.0.1:{}", nats.port),
+            name: "old".into(),
+            ..Default::default()
+        };
+        fuse1090::cluster::Nats::connect(&cfg).await.unwrap();
+        let limits = |name: &'static str| {
+            let js = js.clone();
+            async move {
+                let c = js.get_stream(name).await.unwrap().info().await.unwrap().config.clone();
+                (c.max_age, c.discard)
+            }
+        };
+        assert_eq!(limits("OLD_RECEIVERS").await, (Duration::ZERO, DiscardPolicy::New));
+        // Data still ages out.
+        assert_eq!(limits("OLD_FRAMES").await, (Duration::from_secs(3600), DiscardPolicy::Old));
+    });
+}

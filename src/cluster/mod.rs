@@ -319,10 +319,10 @@ impl Nats {
         let names = Names { name: cfg.name.clone() };
         let n = &cfg.name;
         let max = cfg.max_stream_bytes;
-        let frames = stream(&js, &names, "FRAMES", format!("{n}.frames.>"), max).await?;
-        let receivers = stream(&js, &names, "RECEIVERS", names.receivers(), 64 << 20).await?;
-        let events = stream(&js, &names, "EVENTS", format!("{n}.events.>"), max).await?;
-        let sync = stream(&js, &names, "SYNC", format!("{n}.sync.>"), max).await?;
+        let frames = stream(&js, &names, "FRAMES", format!("{n}.frames.>"), max, Keep::AnHour).await?;
+        let receivers = stream(&js, &names, "RECEIVERS", names.receivers(), 64 << 20, Keep::Always).await?;
+        let events = stream(&js, &names, "EVENTS", format!("{n}.events.>"), max, Keep::AnHour).await?;
+        let sync = stream(&js, &names, "SYNC", format!("{n}.sync.>"), max, Keep::AnHour).await?;
         let lease = Duration::from_secs_f64(cfg.lease_s);
         let bucket = |what: &str, max_age: Duration| kv::Config {
             bucket: names.bucket(what),
@@ -365,26 +365,53 @@ impl Declarations {
     }
 }
 
-/// A stream of the cluster's, created if absent: bounded in bytes and age
-/// (an hour), with a two-minute window in which a message id is stored once.
+/// How long a stream keeps its messages.
+#[derive(Clone, Copy, PartialEq)]
+enum Keep {
+    /// Data: an hour, and the oldest go when the stream is full.
+    AnHour,
+    /// The receivers' declarations: their order gives each receiver its
+    /// index, so one lost would renumber every later receiver, and a role
+    /// started after it aged out could not read the receivers at all. Never
+    /// aged out; a full stream refuses a new declaration (an error) rather
+    /// than drop an old one.
+    Always,
+}
+
+/// A stream of the cluster's, created if absent (and its limits set as
+/// `keep` says on one an earlier version made): bounded in bytes, with a
+/// two-minute window in which a message id is stored once.
 async fn stream(
     js: &jetstream::Context,
     names: &Names,
     what: &str,
     subject: String,
     max_bytes: i64,
+    keep: Keep,
 ) -> Result<stream::Stream> {
+    let (max_age, discard) = match keep {
+        Keep::AnHour => (Duration::from_secs(3600), stream::DiscardPolicy::Old),
+        // Zero: no age limit.
+        Keep::Always => (Duration::ZERO, stream::DiscardPolicy::New),
+    };
     let cfg = stream::Config {
         name: names.stream(what),
         subjects: vec![subject],
         max_bytes,
-        max_age: Duration::from_secs(3600),
+        max_age,
+        discard,
         duplicate_window: Duration::from_secs(120),
         ..Default::default()
     };
-    js.get_or_create_stream(cfg)
-        .await
-        .with_context(|| format!("cannot create the {what} stream (is JetStream enabled: nats-server -js?)"))
+    let mut s = js.get_or_create_stream(cfg.clone()).await.with_context(|| {
+        format!("cannot create the {what} stream (is JetStream enabled: nats-server -js?)")
+    })?;
+    let have = &s.cached_info().config;
+    if (have.max_age, have.discard) != (max_age, discard) {
+        js.update_stream(&cfg).await.with_context(|| format!("cannot set the {what} stream's limits"))?;
+        s = js.get_stream(&cfg.name).await.with_context(|| format!("cannot read the {what} stream"))?;
+    }
+    Ok(s)
 }
 
 async fn kv_store(js: &jetstream::Context, cfg: kv::Config) -> Result<kv::Store> {
