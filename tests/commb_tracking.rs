@@ -2,7 +2,8 @@
 //! 80 aircraft Mode S only, their DF20/21 replies carrying 4,0, 5,0 and 6,0
 //! from the true state, up to 1.3 s old), the Mode S-only aircraft's fused
 //! tracks with their track and turn reports as velocity measurements against
-//! the same run without them, on a seed the scenario file does not use; and
+//! the same run without them, on a seed the scenario file does not use; their
+//! climb rates with the heading and speed reports' vertical rates (6,0); and
 //! their selected altitudes (4,0) in the published tracks.
 
 mod common;
@@ -23,7 +24,7 @@ fn mode_s_only(capture: &[u8], truth: &Truth, commb_velocity: bool) -> (Row, Vec
 fn commb_velocities_sharpen_mode_s_only_tracks() {
     let (capture, truth) = common::simulated("network-rough-ehs", 41);
     let (with, out) = mode_s_only(&capture, &truth, true);
-    let (without, _) = mode_s_only(&capture, &truth, false);
+    let (without, out_without) = mode_s_only(&capture, &truth, false);
     println!(
         "Mode S-only fused tracks, {} aircraft: with Comm-B velocities {:.1} m (NEES {:.2}), without {:.1} m (NEES {:.2})",
         with.aircraft,
@@ -55,4 +56,34 @@ fn commb_velocities_sharpen_mode_s_only_tracks() {
         }
     }
     assert!(selected.len() >= 70, "{} of 80 aircraft with a selected altitude", selected.len());
+
+    // Their climb rates, with the vertical rates of their 6,0 replies.
+    let (climb, climb_without) = (climb_rate_rmse(&out, &truth), climb_rate_rmse(&out_without, &truth));
+    println!("their climb rates: {climb:.2} m/s RMS with Comm-B, {climb_without:.2} m/s without");
+    assert!(climb < 0.95 * climb_without, "{climb} against {climb_without} m/s");
+}
+
+/// RMS error (m/s) of the Mode S-only aircraft's fused tracks' climb rates,
+/// against the truth's height over the second around each.
+fn climb_rate_rmse(out: &[u8], truth: &Truth) -> f64 {
+    let (mut se, mut n) = (0.0, 0);
+    for line in std::str::from_utf8(out).unwrap().lines() {
+        let v: serde_json::Value = serde_json::from_str(line).unwrap();
+        let (Some("track"), Some("fused"), Some(hex)) =
+            (v["type"].as_str(), v["source"].as_str(), v["hex"].as_str())
+        else {
+            continue;
+        };
+        let t = v["t"].as_f64().unwrap();
+        if truth.adsb.get(hex) != Some(&false) {
+            continue;
+        }
+        let (Some(a), Some(b)) = (truth.position(hex, t - 0.5), truth.position(hex, t + 0.5)) else {
+            continue;
+        };
+        se += (v["vel_enu"][2].as_f64().unwrap() - (b.2 - a.2)).powi(2);
+        n += 1;
+    }
+    assert!(n > 1000, "{n} track records of Mode S-only aircraft");
+    (se / n as f64).sqrt()
 }

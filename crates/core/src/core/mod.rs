@@ -180,6 +180,8 @@ pub struct CoreStats {
     pub untracked_positions: u64,
     /// Comm-B track and turn reports given to tracks as velocities.
     pub commb_velocities: u64,
+    /// Comm-B vertical rates (heading and speed reports) given to tracks.
+    pub commb_climbs: u64,
 }
 
 /// Both stages on one thread, driven as quinn-proto drives a connection:

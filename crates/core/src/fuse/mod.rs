@@ -250,7 +250,9 @@ impl Fuser {
                         && cov.cholesky().is_some()
                         && climb.is_none_or(|(c, v)| c.is_finite() && v > 0.0 && v.is_finite())
                 }
-                Observation::Height { h, var } => h.is_finite() && var > 0.0 && var.is_finite(),
+                Observation::Height { h: z, var } | Observation::Climb { rate: z, var } => {
+                    z.is_finite() && var > 0.0 && var.is_finite()
+                }
                 Observation::Tdoa { n, sites } => {
                     (2..=3).contains(&n)
                         && sites[..n as usize].iter().all(|(p, t, s)| {

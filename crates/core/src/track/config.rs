@@ -133,7 +133,8 @@ pub struct TrackConfig {
     /// clock synchronisation (which persists from fix to fix).
     pub mlat_sync_inflation: f64,
     /// Comm-B track and turn reports (BDS 5,0) of aircraft without ADS-B
-    /// velocity feed their tracks as velocity measurements.
+    /// velocity feed their tracks as velocity measurements, and their heading
+    /// and speed reports' vertical rates (BDS 6,0) as climb rates.
     pub commb_velocity: bool,
     /// Variational-Bayes scale of each source's measurement noise.
     pub vb: bool,

@@ -42,6 +42,8 @@ pub enum Observation {
     Velocity { v_en: Vector2<f64>, cov: Matrix2<f64>, climb: Option<(f64, f64)> },
     /// Height only (m, variance): a Mode S altitude reply.
     Height { h: f64, var: f64 },
+    /// Climb rate only (m/s, variance): a Comm-B vertical rate (BDS 6,0).
+    Climb { rate: f64, var: f64 },
     /// Times of arrival of one transmission at 2 or 3 synchronised sites, too
     /// few for a fix: ECEF position (m), time in a common clock (s), sigma (s).
     Tdoa { n: u8, sites: [([f64; 3], f64, f64); 3] },

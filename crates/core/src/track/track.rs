@@ -345,11 +345,15 @@ impl Track {
                 self.vertical(m.t, 0, h, var);
                 Outcome::Applied { nis: 0.0 }
             }
+            Observation::Climb { rate, var } => {
+                self.vertical(m.t, 1, rate, var);
+                Outcome::Applied { nis: 0.0 }
+            }
             Observation::Tdoa { n, sites } => self.tdoa(m.t, dt, &sites[..n as usize]),
         };
         // The horizontal filter moved to m.t only if it took the measurement.
         if matches!(outcome, Outcome::Applied { .. } | Outcome::Restarted)
-            && !matches!(m.obs, Observation::Height { .. })
+            && !matches!(m.obs, Observation::Height { .. } | Observation::Climb { .. })
             && self.state.imm.is_some()
         {
             self.state.t_h = m.t;

@@ -67,6 +67,14 @@ impl Front {
                     out.push(Cmd::Measure { addr, nac_p: None, m, now: arrival });
                 }
             }
+            Some(Inference::Identified(Register::HeadingSpeed(r)))
+                if self.commb_velocity && !d.adsb_velocity_recent =>
+            {
+                if let Some(m) = crate::core::commb::climb(&r, arrival) {
+                    self.stats.commb_climbs += 1;
+                    out.push(Cmd::Measure { addr, nac_p: None, m, now: arrival });
+                }
+            }
             Some(Inference::Identified(Register::SelectedVertical(r))) => {
                 if let Some(alt_ft) = r.mcp_alt_ft {
                     out.push(Cmd::NavAltitude { addr, alt_ft });
