@@ -44,7 +44,7 @@ pub(super) async fn claim_partitions(
     // Registered a while before claiming, so that workers started together share evenly.
     retry("registering the worker", || nats.workers.put(&id, id.clone().into())).await?;
     tokio::time::sleep(every * 2).await;
-    let mut owned: HashMap<u32, (u64, tokio::sync::watch::Sender<bool>)> = HashMap::new();
+    let mut owned: Owned = HashMap::new();
     // Partitions being handed back, at their claims' revisions.
     let mut leaving: HashMap<u32, u64> = HashMap::new();
     let mut tick = tokio::time::interval(every);
@@ -70,21 +70,7 @@ pub(super) async fn claim_partitions(
             }
         }
         retry("renewing the worker's registration", || nats.workers.put(&id, id.clone().into())).await?;
-        let mut lost = Vec::new();
-        let held =
-            owned.iter_mut().map(|(&p, (rev, _))| (p, rev)).chain(leaving.iter_mut().map(|(&p, r)| (p, r)));
-        for (p, rev) in held {
-            match tokio::time::timeout(super::outage::ATTEMPT, renew(&nats, p, &id, *rev)).await {
-                Ok(Ok(Some(r))) => *rev = r,
-                Ok(Err(e)) => {
-                    tracing::warn!(partition = p, error = %e, "partition claim lost");
-                    lost.push(p);
-                }
-                // No answer is not a refusal: kept, and renewed next time
-                // (or found taken then).
-                Ok(Ok(None)) | Err(_) => super::outage::count_retry(),
-            }
-        }
+        let lost = renew_all(&nats, &id, &mut owned, &mut leaving).await;
         if super::outage::retries() != retries_seen {
             retries_seen = super::outage::retries();
             quiet_until = tokio::time::Instant::now() + Duration::from_secs_f64(2.0 * cfg.lease_s);
@@ -102,24 +88,62 @@ pub(super) async fn claim_partitions(
         let live = retry("listing the workers", || count_keys(&nats.workers)).await?.max(1) as u32;
         let share = cfg.partitions.div_ceil(live) as usize;
         hand_back(&mut owned, &mut leaving, share, &to_core, &id);
-        for p in 0..cfg.partitions {
-            if owned.len() + leaving.len() >= share {
-                break;
+        claim_more(&nats, &cfg, &id, share, &mut owned, &leaving, &to_core).await;
+    }
+}
+
+/// The partitions a worker owns: each one's claim revision and its
+/// consumer's stop.
+type Owned = HashMap<u32, (u64, tokio::sync::watch::Sender<bool>)>;
+
+/// Every claim held renewed; returns those found taken by another worker.
+async fn renew_all(nats: &Nats, id: &str, owned: &mut Owned, leaving: &mut HashMap<u32, u64>) -> Vec<u32> {
+    let mut lost = Vec::new();
+    let held =
+        owned.iter_mut().map(|(&p, (rev, _))| (p, rev)).chain(leaving.iter_mut().map(|(&p, r)| (p, r)));
+    for (p, rev) in held {
+        match tokio::time::timeout(super::outage::ATTEMPT, renew(nats, p, id, *rev)).await {
+            Ok(Ok(Some(r))) => *rev = r,
+            Ok(Err(e)) => {
+                tracing::warn!(partition = p, error = %e, "partition claim lost");
+                lost.push(p);
             }
-            if owned.contains_key(&p) || leaving.contains_key(&p) {
-                continue;
-            }
-            if let Ok(rev) = nats.claims.create(p.to_string(), id.clone().into()).await {
-                let cp = match nats.checkpoints.get(p.to_string()).await {
-                    Ok(Some(b)) => wire::decode::<Checkpoint>(&b).unwrap_or_default(),
-                    _ => Checkpoint::default(),
-                };
-                let _ = to_core.send(ToCore::Take(p, cp));
-                let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
-                tokio::spawn(keep_consuming(nats.clone(), cfg.clone(), p, to_core.clone(), stop_rx));
-                owned.insert(p, (rev, stop_tx));
-                tracing::info!(partition = p, worker = %id, "partition claimed");
-            }
+            // No answer is not a refusal: kept, and renewed next time
+            // (or found taken then).
+            Ok(Ok(None)) | Err(_) => super::outage::count_retry(),
+        }
+    }
+    lost
+}
+
+/// Unclaimed partitions claimed, lowest first, up to `share` held (those
+/// being handed back counted), each with its checkpoint and a consumer.
+async fn claim_more(
+    nats: &std::sync::Arc<Nats>,
+    cfg: &ClusterConfig,
+    id: &str,
+    share: usize,
+    owned: &mut Owned,
+    leaving: &HashMap<u32, u64>,
+    to_core: &mpsc::Sender<ToCore>,
+) {
+    for p in 0..cfg.partitions {
+        if owned.len() + leaving.len() >= share {
+            break;
+        }
+        if owned.contains_key(&p) || leaving.contains_key(&p) {
+            continue;
+        }
+        if let Ok(rev) = nats.claims.create(p.to_string(), id.to_string().into()).await {
+            let cp = match nats.checkpoints.get(p.to_string()).await {
+                Ok(Some(b)) => wire::decode::<Checkpoint>(&b).unwrap_or_default(),
+                _ => Checkpoint::default(),
+            };
+            let _ = to_core.send(ToCore::Take(p, cp));
+            let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+            tokio::spawn(keep_consuming(nats.clone(), cfg.clone(), p, to_core.clone(), stop_rx));
+            owned.insert(p, (rev, stop_tx));
+            tracing::info!(partition = p, worker = %id, "partition claimed");
         }
     }
 }
@@ -128,7 +152,7 @@ pub(super) async fn claim_partitions(
 /// to the processing to be handed back; their claims stay (renewed) until
 /// the processing says their results are stored.
 fn hand_back(
-    owned: &mut HashMap<u32, (u64, tokio::sync::watch::Sender<bool>)>,
+    owned: &mut Owned,
     leaving: &mut HashMap<u32, u64>,
     share: usize,
     to_core: &mpsc::Sender<ToCore>,

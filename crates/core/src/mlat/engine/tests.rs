@@ -401,6 +401,17 @@ fn learnt_state_survives_a_restart_but_not_a_move() {
     assert!(LearntState::load(&path).unwrap_err().contains("version 99"));
 }
 
+/// The `k`th of a stream of ADS-B aircraft's transmissions, one a second
+/// from `t0`, from all around the receivers: what their surveys learn from.
+fn adsb_group_around(rxs: &[ReceiverDecl], k: usize, t0: f64) -> Group {
+    let (lat, lon) = (48.45 + 0.04 * (k % 17) as f64, 1.95 + 0.05 * (k % 19) as f64);
+    let target = geodetic_to_ecef(lat, lon, 30_000.0 * FT_TO_M);
+    let mut g = group(rxs, target, t0 + k as f64);
+    g.info.adsb_ecef = Some(target);
+    g.info.adsb_sigma_m = 10.0;
+    g
+}
+
 /// Workers of a cluster each see part of the ADS-B traffic; the clock
 /// service surveys the receivers from all of it, and every worker places a
 /// misplaced one as one node would (here r2, 200 m east of where it is
@@ -428,11 +439,7 @@ fn workers_place_a_misplaced_receiver_by_the_services_survey() {
         }
         let t0 = 1_700_000_000.0;
         for k in 0..1200 {
-            let (lat, lon) = (48.45 + 0.04 * (k % 17) as f64, 1.95 + 0.05 * (k % 19) as f64);
-            let target = geodetic_to_ecef(lat, lon, 30_000.0 * FT_TO_M);
-            let mut g = group(&actual, target, t0 + k as f64);
-            g.info.adsb_ecef = Some(target);
-            g.info.adsb_sigma_m = 10.0;
+            let g = adsb_group_around(&actual, k, t0);
             let w = &mut workers[k % 2];
             w.on_group(&g, t0 + k as f64 + 0.2);
             for note in w.take_sync_notes() {
@@ -470,11 +477,7 @@ fn a_copy_milliseconds_off_is_kept_out_of_the_surveys() {
     let (mut m, rxs) = engine();
     let t0 = 1_700_000_000.0;
     for k in 0..600 {
-        let (lat, lon) = (48.45 + 0.04 * (k % 17) as f64, 1.95 + 0.05 * (k % 19) as f64);
-        let target = geodetic_to_ecef(lat, lon, 30_000.0 * FT_TO_M);
-        let mut g = group(&rxs, target, t0 + k as f64);
-        g.info.adsb_ecef = Some(target);
-        g.info.adsb_sigma_m = 10.0;
+        let mut g = adsb_group_around(&rxs, k, t0);
         if k % 10 == 0 {
             delay(&mut g.copies[3], 5e-3);
         }
