@@ -345,10 +345,12 @@ impl Track {
                 self.vertical(m.t, 0, h, var);
                 Outcome::Applied { nis: 0.0 }
             }
-            Observation::Climb { rate, var } => {
-                self.vertical(m.t, 1, rate, var);
-                Outcome::Applied { nis: 0.0 }
-            }
+            // A climb rate the channel's gate keeps out (a Comm-B register
+            // misread, say) is counted as gated, as a position would be.
+            Observation::Climb { rate, var } => match self.vertical(m.t, 1, rate, var) {
+                true => Outcome::Applied { nis: 0.0 },
+                false => Outcome::Gated,
+            },
             Observation::Tdoa { n, sites } => self.tdoa(m.t, dt, &sites[..n as usize]),
         };
         // The horizontal filter moved to m.t only if it took the measurement.

@@ -178,6 +178,35 @@ fn a_vertical_channel_left_behind_starts_again() {
     assert!(worst.iter().all(|w| *w < 40.0), "metres off in the climb, per run: {worst:?}");
 }
 
+/// Climb rates (Comm-B vertical rates) feed the vertical channel once it
+/// has a height; one far outside it (a register misread) is gated, counted
+/// as gated, and moves nothing.
+#[test]
+fn a_climb_rate_feeds_the_vertical_channel_and_a_wild_one_is_gated() {
+    let mut tr = track();
+    let climb = |t: f64, rate: f64| Measurement {
+        t,
+        source: Source::Mlat,
+        obs: Observation::Climb { rate, var: 0.3 },
+    };
+    assert_eq!(tr.apply(climb(1.0, 5.0)), Outcome::Gated, "no height yet");
+    for k in 0..10 {
+        let t = 2.0 + k as f64;
+        let h = Measurement {
+            t,
+            source: Source::Mlat,
+            obs: Observation::Height { h: 3000.0 + 5.0 * k as f64, var: 64.0 },
+        };
+        tr.apply(h);
+        assert_eq!(tr.apply(climb(t + 0.5, 5.0)), Outcome::Applied { nis: 0.0 });
+    }
+    let v = tr.state.vertical.expect("a vertical channel");
+    assert!((v.x[1] - 5.0).abs() < 0.5, "climb {} m/s", v.x[1]);
+    assert_eq!(tr.apply(climb(12.0, -40.0)), Outcome::Gated);
+    let after = tr.state.vertical.expect("a vertical channel");
+    assert!((after.x[1] - 5.0).abs() < 0.5, "climb {} m/s after a wild rate", after.x[1]);
+}
+
 #[test]
 fn a_transfer_to_a_higher_plane_keeps_the_motion_it_describes() {
     // 240 m/s east, in a plane at the surface and one 10 km up.

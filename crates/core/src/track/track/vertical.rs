@@ -33,7 +33,8 @@ impl Vertical {
     /// leaves a channel that believed its precise heights behind, and
     /// without a restart it never came back (tma-busy with the region's
     /// GNSS-baro difference, 8 m heights: a kilometre off for minutes).
-    pub(super) fn update(&mut self, row: usize, z: f64, var: f64) {
+    /// Returns whether it was taken.
+    pub(super) fn update(&mut self, row: usize, z: f64, var: f64) -> bool {
         let s = self.p[(row, row)] + var;
         let nu = z - self.x[row];
         if !(s > 0.0 && s.is_finite()) || nu * nu / s > 4.5 * 4.5 {
@@ -43,7 +44,7 @@ impl Vertical {
                     *self = Vertical::new(z, var);
                 }
             }
-            return;
+            return false;
         }
         if row == 0 {
             self.gated_heights = 0;
@@ -53,6 +54,7 @@ impl Vertical {
         let ikh = Matrix2::identity()
             - k * Vector2::new((row == 0) as u8 as f64, (row == 1) as u8 as f64).transpose();
         self.p = ikh * self.p * ikh.transpose() + k * var * k.transpose();
+        true
     }
 }
 
@@ -63,17 +65,22 @@ impl Track {
     /// difference carry an offset that persists (pressure, temperature):
     /// averaging many of them would not remove it, so they only keep the
     /// channel within their own uncertainty, never below it.
-    pub(super) fn vertical(&mut self, t: f64, row: usize, z: f64, var: f64) {
-        match &mut self.state.vertical {
+    /// Returns whether the channel took it (a climb rate beyond the gate,
+    /// or before any height, is not).
+    pub(super) fn vertical(&mut self, t: f64, row: usize, z: f64, var: f64) -> bool {
+        let taken = match &mut self.state.vertical {
             Some(v) => {
                 v.predict(t - self.state.t_v, self.cfg.vertical_q);
-                if !(row == 0 && var >= BIASED_HEIGHT_VAR && v.p[(0, 0)] < var) {
-                    v.update(row, z, var);
-                }
+                // A biased height kept out is not an outlier.
+                (row == 0 && var >= BIASED_HEIGHT_VAR && v.p[(0, 0)] < var) || v.update(row, z, var)
             }
-            None if row == 0 => self.state.vertical = Some(Vertical::new(z, var)),
-            None => return,
-        }
+            None if row == 0 => {
+                self.state.vertical = Some(Vertical::new(z, var));
+                true
+            }
+            None => return false,
+        };
         self.state.t_v = t;
+        taken
     }
 }
