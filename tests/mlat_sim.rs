@@ -399,6 +399,8 @@ fn a_misplaced_gps_receiver_is_surveyed_from_the_traffic() {
         let r = last[&k];
         if t.id == "n06" {
             assert_eq!(r.reason, Some(fuse1090::mlat::Exclusion::Misplaced), "{r:?}");
+            // What it learnt, it learnt against its wrong position: not reported.
+            assert_eq!((r.sigma_ns, r.offset_ns, r.outlier_rate), (None, None, None), "{r:?}");
             continue;
         }
         assert_eq!(r.state, RxState::Ok, "{}: {r:?}", t.id);

@@ -111,9 +111,11 @@ pub fn gps_mean_offset<'a>(timings: impl Iterator<Item = (ClockKind, &'a TimingM
 
 /// Receiver `rx`'s report at `t` from its clock health `h` and its timing
 /// model `m`, out of the fixes for `reason`, a GPS receiver's offset told
-/// against `gps_mean` ([`gps_mean_offset`]); its position fields left out.
-/// The engine adds its survey; a cluster's clock, which learns the timing
-/// and has no survey, reports this.
+/// against `gps_mean` ([`gps_mean_offset`]); its position fields left out
+/// (the engine and a cluster's clock add their survey's). A misplaced
+/// receiver's timing is not reported: what it learnt, it learnt against a
+/// wrong position (its sigma several times the truth), and out of the
+/// fixes it learns nothing more.
 pub fn timing_report(
     rx: usize,
     t: f64,
@@ -123,10 +125,10 @@ pub fn timing_report(
     m: &TimingModel,
     gps_mean: Option<f64>,
 ) -> ReceiverReport {
-    let learnt = m.learnt();
+    let learnt = m.learnt() && reason != Some(Exclusion::Misplaced);
     let state = if reason.is_some() {
         RxState::Excluded
-    } else if learnt || h.sync_updates >= crate::mlat::sync::HEALTH_MIN_UPDATES {
+    } else if m.learnt() || h.sync_updates >= crate::mlat::sync::HEALTH_MIN_UPDATES {
         RxState::Ok
     } else {
         RxState::Learning
