@@ -292,6 +292,28 @@ impl NatsServer {
     }
 }
 
+/// Cluster `name`'s streams and buckets deleted once its run is over: each
+/// stream reserves its byte limit in the server's store, and four
+/// clusters' reservations outgrew a small disk's share (the fourth run's
+/// worker was refused its streams).
+fn forget_cluster(port: u16, name: &str) {
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    rt.block_on(async {
+        use futures_util::StreamExt;
+        let client = async_nats::connect(format!("127.0.0.1:{port}")).await.unwrap();
+        let js = async_nats::jetstream::new(client);
+        let (streams, buckets) = (format!("{}_", name.to_uppercase()), format!("KV_{name}-"));
+        let names: Vec<String> = js.stream_names().map(|n| n.unwrap()).collect().await;
+        let ours: Vec<&String> =
+            names.iter().filter(|n| n.starts_with(&streams) || n.starts_with(&buckets)).collect();
+        // Four streams and four buckets.
+        assert_eq!(ours.len(), 8, "{name}: {names:?}");
+        for n in ours {
+            js.delete_stream(n).await.unwrap();
+        }
+    });
+}
+
 fn publish_garbage(port: u16, subjects: &[String]) {
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
     rt.block_on(async {
@@ -467,6 +489,7 @@ fn a_cluster_of_processes_tracks_as_one_node_does_and_survives_a_killed_worker()
     for (name, fault) in faults {
         let garbage = matches!(fault, Fault::None);
         let run = run_cluster(&mut nats, name, &capture_path, fault, garbage);
+        forget_cluster(nats.port, name);
         let many = report(&truth, &run.output);
         eprintln!(
             "{name}: ingest {:?}\n publisher {:?}\n clock {:?}\n workers {:?}",
