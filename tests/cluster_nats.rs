@@ -292,16 +292,22 @@ impl NatsServer {
     }
 }
 
-/// Cluster `name`'s streams and buckets deleted once its run is over: each
-/// stream reserves its byte limit in the server's store, and four
-/// clusters' reservations outgrew a small disk's share (the fourth run's
-/// worker was refused its streams).
-fn forget_cluster(port: u16, name: &str) {
+/// A runtime for the test's own calls to the NATS server on `port`, and a
+/// JetStream context connected there.
+fn jetstream(port: u16) -> (tokio::runtime::Runtime, async_nats::jetstream::Context) {
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    let client = rt.block_on(async_nats::connect(format!("127.0.0.1:{port}"))).unwrap();
+    (rt, async_nats::jetstream::new(client))
+}
+
+/// Cluster `name`'s streams and buckets deleted once its run is over: each
+/// stream reserves its byte limit in the server's store, and the
+/// reservations of runs left standing outgrow a small disk's share, so that
+/// a later run's roles are refused their streams.
+fn forget_cluster(port: u16, name: &str) {
+    let (rt, js) = jetstream(port);
     rt.block_on(async {
         use futures_util::StreamExt;
-        let client = async_nats::connect(format!("127.0.0.1:{port}")).await.unwrap();
-        let js = async_nats::jetstream::new(client);
         let (streams, buckets) = (format!("{}_", name.to_uppercase()), format!("KV_{name}-"));
         let names: Vec<String> = js.stream_names().map(|n| n.unwrap()).collect().await;
         let ours: Vec<&String> =
@@ -315,10 +321,8 @@ fn forget_cluster(port: u16, name: &str) {
 }
 
 fn publish_garbage(port: u16, subjects: &[String]) {
-    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    let (rt, js) = jetstream(port);
     rt.block_on(async {
-        let client = async_nats::connect(format!("127.0.0.1:{port}")).await.unwrap();
-        let js = async_nats::jetstream::new(client);
         for s in subjects {
             js.publish(s.clone(), "not a batch".into()).await.unwrap().await.unwrap();
         }
@@ -800,10 +804,8 @@ fn the_receiver_declarations_are_kept_for_good() {
     let Some(server) = nats_server() else { return };
     let dir = tempfile::tempdir().unwrap();
     let nats = NatsServer::start(&server, dir.path());
-    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    let (rt, js) = jetstream(nats.port);
     rt.block_on(async {
-        let client = async_nats::connect(format!("127.0.0.1:{}", nats.port)).await.unwrap();
-        let js = async_nats::jetstream::new(client);
         let old = Config {
             name: "OLD_RECEIVERS".into(),
             subjects: vec!["old.receivers".into()],

@@ -77,7 +77,7 @@ pub async fn retry<T, E: Display, F: Future<Output = Result<T, E>>>(
         if t0.elapsed() >= OUTAGE {
             return Err(anyhow!("{what}: NATS away for {} s: {error}", OUTAGE.as_secs()));
         }
-        RETRIES.fetch_add(1, Ordering::Relaxed);
+        count_retry();
         tokio::time::sleep(wait).await;
         wait = (wait * 2).min(LONGEST_WAIT);
     }
