@@ -3,18 +3,23 @@
 //! from the true state, up to 1.3 s old), the Mode S-only aircraft's fused
 //! tracks with their track and turn reports as velocity measurements against
 //! the same run without them, on a seed the scenario file does not use; their
-//! climb rates with the heading and speed reports' vertical rates (6,0); and
-//! their selected altitudes (4,0) in the published tracks.
+//! climb rates with the heading and speed reports' vertical rates (6,0); their
+//! velocities with those reports' headings and airspeeds too, through the
+//! wind and magnetic variation learnt from the ADS-B aircraft (the scenario's
+//! air is a windy day's); and their selected altitudes (4,0) in the
+//! published tracks.
 
 mod common;
 
-use fuse1090::core::CoreConfig;
+use fuse1090::core::{Core, CoreConfig};
 use fuse1090::eval::montecarlo::run_in_memory;
 use fuse1090::eval::{evaluate, Row, Truth};
+use fuse1090::feed::capture::CaptureReader;
 
-fn mode_s_only(capture: &[u8], truth: &Truth, commb_velocity: bool) -> (Row, Vec<u8>) {
+fn mode_s_only(capture: &[u8], truth: &Truth, commb_velocity: bool, commb_heading: bool) -> (Row, Vec<u8>) {
     let mut cfg = CoreConfig::default();
     cfg.track.commb_velocity = commb_velocity;
+    cfg.track.commb_heading = commb_heading;
     let out = run_in_memory(capture, &cfg).unwrap();
     let report = evaluate(truth, out.as_slice()).unwrap();
     (report.overall.into_iter().find(|r| r.source == "fused:mode-s-only").expect("Mode S-only aircraft"), out)
@@ -23,8 +28,14 @@ fn mode_s_only(capture: &[u8], truth: &Truth, commb_velocity: bool) -> (Row, Vec
 #[test]
 fn commb_velocities_sharpen_mode_s_only_tracks() {
     let (capture, truth) = common::simulated("network-rough-ehs", 41);
-    let (with, out) = mode_s_only(&capture, &truth, true);
-    let (without, out_without) = mode_s_only(&capture, &truth, false);
+    let (with, out) = mode_s_only(&capture, &truth, true, true);
+    let (without, out_without) = mode_s_only(&capture, &truth, false, false);
+    let (no_heading, _) = mode_s_only(&capture, &truth, true, false);
+    println!(
+        "Mode S-only fused tracks with track and turn reports only: {:.1} m (NEES {:.2})",
+        no_heading.h_rmse_m,
+        no_heading.nees.unwrap()
+    );
     println!(
         "Mode S-only fused tracks, {} aircraft: with Comm-B velocities {:.1} m (NEES {:.2}), without {:.1} m (NEES {:.2})",
         with.aircraft,
@@ -35,6 +46,9 @@ fn commb_velocities_sharpen_mode_s_only_tracks() {
     );
     assert_eq!(with.aircraft, 60);
     assert!(with.h_rmse_m < 0.8 * without.h_rmse_m, "{} against {}", with.h_rmse_m, without.h_rmse_m);
+    // The headings and airspeeds, through the wind learnt, add to the track
+    // and turn reports.
+    assert!(with.h_rmse_m < 0.95 * no_heading.h_rmse_m, "{} against {}", with.h_rmse_m, no_heading.h_rmse_m);
     assert!(with.continuity >= without.continuity - 0.01);
     // The fixes' persistent errors make some of these tracks overconfident
     // with or without (docs/tracking.md); the velocities must not make it gross.
@@ -86,4 +100,41 @@ fn climb_rate_rmse(out: &[u8], truth: &Truth) -> f64 {
     }
     assert!(n > 1000, "{n} track records of Mode S-only aircraft");
     (se / n as f64).sqrt()
+}
+
+/// What the wind learner makes of the scenario's air: the magnetic
+/// variation and the wind at the heights the ADS-B aircraft fly, each
+/// within a few of its sigmas of the truth.
+#[test]
+fn the_air_is_learnt_from_the_aircraft_reporting_both_ways() {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/scenarios/network-rough-ehs.toml");
+    let air = fuse1090::sim::scenario::Scenario::load(&path).unwrap().air;
+    let (capture, _) = common::simulated("network-rough-ehs", 42);
+    let mut core = Core::new(&CoreConfig::default());
+    let mut reader = CaptureReader::new(capture.as_slice(), "capture");
+    while let Some(rec) = reader.next_record().unwrap() {
+        core.handle_record(rec);
+        while core.poll_event().is_some() {}
+    }
+    core.finish();
+    let wind = core.wind();
+    assert!(wind.stats.learnt > 500, "{:?}", wind.stats);
+    let (variation, sigma) = wind.variation_deg();
+    println!("variation {variation:.2} +- {sigma:.2} deg (true {})", air.magnetic_variation_deg);
+    assert!(
+        (variation - air.magnetic_variation_deg).abs() < (4.0 * sigma).max(0.3),
+        "{variation} +- {sigma}"
+    );
+    for alt_m in [2_000.0, 5_000.0, 9_000.0] {
+        let (learnt, sigma) = wind.wind_at(alt_m);
+        let truth = air.wind_at(alt_m);
+        println!("wind at {alt_m} m: {learnt:?} +- {sigma:?}, true {truth:?}");
+        for axis in 0..2 {
+            assert!(
+                (learnt[axis] - truth[axis]).abs() < (4.0 * sigma[axis]).max(1.5),
+                "at {alt_m} m: {learnt} +- {sigma} against {truth:?}"
+            );
+        }
+    }
 }

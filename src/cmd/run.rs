@@ -266,6 +266,7 @@ fn diagnostics(
     let name = |k: usize| front.receiver_id(k).to_string();
     let mut diagnostics = vec![front.mlat().report(last, &name), front.mlat().receivers_line(last, &name)];
     diagnostics.extend(front.delay_report());
+    diagnostics.extend(front.air_report());
     let late = front.late_copies();
     if !late.is_empty() {
         let by_rx: Vec<String> = late.iter().take(6).map(|(id, n)| format!("{id} {n}")).collect();

@@ -1,6 +1,8 @@
 //! A Comm-B track and turn report (BDS 5,0) as a velocity measurement, and
-//! a heading and speed report's vertical rate (BDS 6,0) as a climb rate,
-//! for aircraft whose velocity nothing else reports (no ADS-B).
+//! a heading and speed report's (BDS 6,0) vertical rate as a climb rate and
+//! its heading and airspeed as a weaker velocity (through the wind learnt,
+//! [`super::wind`]), for aircraft whose velocity nothing else reports (no
+//! ADS-B).
 //!
 //! The register holds the aircraft's true track and ground speed as its
 //! avionics last wrote them, and they refresh it at least every 1.3 s (ICAO
@@ -13,8 +15,9 @@
 
 use nalgebra::{Matrix2, Vector2};
 
+use super::wind::{AirVector, WindField};
 use crate::geo::{FT_TO_M, KT_TO_MS};
-use crate::modes::commb::{Bds50, Bds60, REFRESH_S};
+use crate::modes::commb::{air, Bds50, Bds60, ReplyContext, REFRESH_S};
 use crate::track::measurement::{Measurement, Observation, Source};
 
 /// Turn rate assumed when the register does not report one: a standard-rate turn.
@@ -45,6 +48,75 @@ pub fn velocity(r: &Bds50, arrival: f64) -> Option<Measurement> {
         // Mode S surveillance, as altitude replies: with multilateration, apart from ADS-B.
         source: Source::Mlat,
         obs: Observation::Velocity { v_en: along * gs, cov, climb: None },
+    })
+}
+
+/// The register's steps: heading (90/512 degrees), IAS (1 kt), Mach (0.004).
+const HEADING_STEP_DEG: f64 = 90.0 / 512.0;
+const MACH_STEP: f64 = 0.004;
+/// The air data's own error (m/s of true airspeed, 1 sigma): pitot and
+/// static position errors, a few knots.
+const AIRSPEED_SIGMA_MS: f64 = 1.5;
+/// The heading reference's own error (deg, 1 sigma).
+const HEADING_SIGMA_DEG: f64 = 0.5;
+/// A prediction weaker than this (m/s, per axis, 1 sigma) tells a track
+/// nothing its positions do not: the wind is not learnt yet.
+const MAX_USEFUL_SIGMA_MS: f64 = 15.0;
+
+/// The velocity through the air a heading and speed report gives: its
+/// magnetic heading and its true airspeed (from its IAS, else its Mach, at
+/// the altitude known; the standard atmosphere's temperature, which the
+/// wind learner's scale corrects), with the register's steps and age.
+/// `None` without a heading, an airspeed or an altitude.
+pub fn air_vector(r: &Bds60, ctx: &ReplyContext) -> Option<(AirVector, f64)> {
+    let heading_deg = r.mag_heading_deg?;
+    let (alt_ft, _) = ctx.known.alt_ft?;
+    let alt_ft = alt_ft as f64;
+    let sound = air::speed_of_sound_ms(alt_ft);
+    let (tas, step) = match (r.ias_kt, r.mach) {
+        (Some(ias), _) if ias > 0 => {
+            let tas = air::mach_of_cas(ias as f64, alt_ft) * sound;
+            // One knot of IAS is about TAS/IAS knots of TAS.
+            (tas, KT_TO_MS * tas / (ias as f64 * KT_TO_MS))
+        }
+        (_, Some(mach)) if mach > 0.0 => (mach * sound, MACH_STEP * sound),
+        _ => return None,
+    };
+    let age_sigma_s = REFRESH_S / 12f64.sqrt();
+    let turn_rad_s = ctx.turn_dps.map_or(UNKNOWN_TURN_DPS, f64::abs).to_radians();
+    let var_along = step * step / 12.0 + AIRSPEED_SIGMA_MS.powi(2) + (ALONG_ACCEL_MS2 * age_sigma_s).powi(2);
+    let var_cross = (tas * HEADING_STEP_DEG.to_radians()).powi(2) / 12.0
+        + (tas * HEADING_SIGMA_DEG.to_radians()).powi(2)
+        + (tas * turn_rad_s * age_sigma_s).powi(2);
+    let (s, c) = heading_deg.to_radians().sin_cos();
+    let along = Vector2::new(s, c);
+    let cross = Vector2::new(c, -s);
+    let cov = along * along.transpose() * var_along + cross * cross.transpose() * var_cross;
+    Some((AirVector { en: along * tas, cov }, alt_ft * FT_TO_M))
+}
+
+/// The ground velocity a heading and speed report received at `arrival`
+/// gives through the wind learnt, or `None` when the report lacks what it
+/// needs or the wind is not learnt well enough to say anything. The part
+/// of its error the aircraft's reports share (the wind where it flies) is
+/// counted once for all its reports of the last minute, so a track fed
+/// every one of them is not made surer than that.
+pub fn heading_velocity(
+    r: &Bds60,
+    ctx: &ReplyContext,
+    wind: &WindField,
+    arrival: f64,
+) -> Option<Measurement> {
+    let (air, alt_m) = air_vector(r, ctx)?;
+    let p = wind.predict(alt_m, &air);
+    let cov = p.persistent * ctx.heading_reports.max(1.0) + p.independent;
+    if p.persistent.trace() > 2.0 * MAX_USEFUL_SIGMA_MS.powi(2) {
+        return None;
+    }
+    Some(Measurement {
+        t: arrival - REFRESH_S / 2.0,
+        source: Source::Mlat,
+        obs: Observation::Velocity { v_en: p.v_en, cov, climb: None },
     })
 }
 
@@ -101,6 +173,61 @@ mod tests {
         // 206 m/s at 3 deg/s for 0.375 s: 4 m/s across.
         assert!((turning[(1, 1)].sqrt() - 4.07).abs() < 0.05, "{turning}");
         assert!(velocity(&Bds50 { gs_kt: None, ..r(0.0) }, 0.0).is_none());
+    }
+
+    /// A heading and speed report: its airspeed from the IAS at the altitude
+    /// (else the Mach), nothing without a heading or an altitude, and through
+    /// a wind learnt, a ground velocity whose shared part is counted once
+    /// for the aircraft's reports of the last minute.
+    #[test]
+    fn a_heading_report_through_the_wind_learnt() {
+        let r = Bds60 {
+            mag_heading_deg: Some(90.0),
+            ias_kt: Some(250),
+            mach: Some(0.6),
+            baro_rate_fpm: None,
+            inertial_rate_fpm: None,
+        };
+        let ctx = |alt: Option<i32>, reports: f64| ReplyContext {
+            known: crate::modes::commb::Known { alt_ft: alt.map(|a| (a, 0.0)), velocity: None },
+            adsb_velocity: None,
+            turn_dps: Some(0.0),
+            heading_reports: reports,
+        };
+        let (a, alt_m) = air_vector(&r, &ctx(Some(20_000), 1.0)).unwrap();
+        // 250 kt IAS at FL200 is Mach 0.55, 336 kt true (ISA).
+        let tas = air::mach_of_cas(250.0, 20_000.0) * air::speed_of_sound_ms(20_000.0);
+        assert!((tas / KT_TO_MS - 336.0).abs() < 1.0, "{}", tas / KT_TO_MS);
+        assert!((a.en[0] - tas).abs() < 1e-9 && a.en[1].abs() < 1e-9, "{}", a.en);
+        assert!((alt_m - 6096.0).abs() < 1.0);
+        // Across the heading (north) the 0.5 degree reference and the step.
+        assert!((a.cov[(1, 1)].sqrt() - tas * 0.5f64.to_radians()).abs() < 0.2, "{}", a.cov);
+        let (m, _) = air_vector(&Bds60 { ias_kt: None, ..r }, &ctx(Some(20_000), 1.0)).unwrap();
+        assert!((m.en[0] - 0.6 * air::speed_of_sound_ms(20_000.0)).abs() < 1e-9);
+        assert!(air_vector(&r, &ctx(None, 1.0)).is_none());
+        assert!(air_vector(&Bds60 { mag_heading_deg: None, ..r }, &ctx(Some(20_000), 1.0)).is_none());
+
+        // Nothing learnt: too weak to say anything.
+        let mut wind = WindField::default();
+        assert!(heading_velocity(&r, &ctx(Some(20_000), 1.0), &wind, 100.0).is_none());
+        // A west wind of 20 m/s and no variation, learnt from aircraft on many headings.
+        for k in 0..300 {
+            let h = (k * 47 % 360) as f64;
+            let (s, c) = h.to_radians().sin_cos();
+            let air = AirVector { en: Vector2::new(s, c) * 180.0, cov: Matrix2::identity() };
+            let g = air.en + Vector2::new(20.0, 0.0);
+            wind.learn(k as f64, 6_000.0, &air, g, Matrix2::identity(), 1.0);
+        }
+        let velocity_cov = |reports| match heading_velocity(&r, &ctx(Some(20_000), reports), &wind, 400.0) {
+            Some(Measurement { obs: Observation::Velocity { v_en, cov, .. }, t, .. }) => {
+                assert!((t - (400.0 - REFRESH_S / 2.0)).abs() < 1e-9);
+                assert!((v_en - Vector2::new(tas + 20.0, 0.0)).norm() < 1.0, "{v_en}");
+                cov
+            }
+            other => panic!("{other:?}"),
+        };
+        let (one, many) = (velocity_cov(1.0), velocity_cov(15.0));
+        assert!(many[(0, 0)] > one[(0, 0)] + 10.0 * wind.scatter_ms().powi(2), "{one} {many}");
     }
 
     #[test]

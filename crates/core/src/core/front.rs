@@ -17,6 +17,7 @@ use crate::FastMap;
 use super::back::Cmd;
 use super::delay::DelayCal;
 use super::lateness::Lateness;
+use super::wind::WindField;
 use super::ReceiverNames;
 use super::{CoreConfig, CoreStats, Dating, Event, PositionReport};
 use crate::feed::capture::{CaptureRecord, ClockKind, ReceiverDecl};
@@ -98,6 +99,10 @@ pub struct Front {
     sync_inflation: f64,
     /// Comm-B track and turn reports feed tracks without ADS-B velocity.
     commb_velocity: bool,
+    /// The wind, magnetic variation and temperature learnt, for heading
+    /// reports, and whether their headings feed tracks.
+    wind: WindField,
+    commb_heading: bool,
     /// Receivers the configuration describes: what it says of them (its
     /// position and clock, and its timing when given) wins over their
     /// declaration in a capture.
@@ -150,6 +155,8 @@ impl Front {
             time_sigma: (cfg.track.adsb_time_sigma_gps_s, cfg.track.adsb_time_sigma_arrival_s),
             sync_inflation: cfg.track.mlat_sync_inflation,
             commb_velocity: cfg.track.commb_velocity,
+            wind: WindField::default(),
+            commb_heading: cfg.track.commb_heading,
             known: Vec::new(),
             ids: ReceiverNames::default(),
         }
@@ -483,6 +490,37 @@ impl Front {
     /// The receivers whose network delay is learnt, with its mean and spread (s).
     fn learnt(&self) -> impl Iterator<Item = (&RxState, f64, f64)> {
         self.receivers.iter().filter_map(|r| r.delay.estimate().map(|(m, s)| (r, m, s)))
+    }
+
+    /// What is learnt of the air from heading reports.
+    pub fn wind(&self) -> &WindField {
+        &self.wind
+    }
+
+    /// One line on the air learnt from heading reports (`None` if nothing
+    /// was): the magnetic variation, the wind at a few heights, its spread.
+    pub fn air_report(&self) -> Option<String> {
+        let w = &self.wind;
+        if w.stats.learnt == 0 {
+            return None;
+        }
+        let (var, var_sigma) = w.variation_deg();
+        let winds: Vec<String> = [1_000.0, 5_000.0, 10_000.0]
+            .iter()
+            .map(|&h| {
+                let (v, s) = w.wind_at(h);
+                format!("{:.0} km {:+.0}/{:+.0} m/s +-{:.0}", h / 1000.0, v[0], v[1], s.max())
+            })
+            .collect();
+        Some(format!(
+            "air: learnt from {} heading reports ({} outliers): magnetic variation {var:+.1} +-{var_sigma:.1} deg; \
+             wind east/north {}; spread {:.1} m/s; {} heading reports given to tracks as velocities",
+            w.stats.learnt,
+            w.stats.outliers,
+            winds.join(", "),
+            w.scatter_ms(),
+            self.stats.commb_headings
+        ))
     }
 
     /// One line on the network delays learnt (`None` if none was): the

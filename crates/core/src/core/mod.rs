@@ -22,6 +22,7 @@ pub mod delay;
 pub mod front;
 pub mod lateness;
 pub mod receiver_names;
+pub mod wind;
 
 use std::collections::VecDeque;
 
@@ -182,6 +183,8 @@ pub struct CoreStats {
     pub commb_velocities: u64,
     /// Comm-B vertical rates (heading and speed reports) given to tracks.
     pub commb_climbs: u64,
+    /// Comm-B headings and airspeeds given to tracks as velocities.
+    pub commb_headings: u64,
 }
 
 /// Both stages on one thread, driven as quinn-proto drives a connection:
@@ -290,6 +293,11 @@ impl Core {
 
     pub fn mlat(&self) -> &Mlat {
         self.front.mlat()
+    }
+
+    /// What is learnt of the air (wind, magnetic variation) from heading reports.
+    pub fn wind(&self) -> &wind::WindField {
+        self.front.wind()
     }
 
     pub fn fuser(&self) -> &Fuser {

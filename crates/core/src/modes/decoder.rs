@@ -85,8 +85,8 @@ pub struct Decoded {
     pub gnss_baro_diff_ft: Option<i32>,
     /// A DF20/21 reply's Comm-B register, inferred with what is known of the aircraft.
     pub commb: Option<Inference>,
-    /// The aircraft reported its velocity by ADS-B lately (set for Comm-B replies).
-    pub adsb_velocity_recent: bool,
+    /// What is known of the aircraft beside a Comm-B reply (for Comm-B replies).
+    pub commb_context: commb::ReplyContext,
 }
 
 impl Decoded {
@@ -279,7 +279,7 @@ impl Decoder {
             nac_p: None,
             gnss_baro_diff_ft: None,
             commb: None,
-            adsb_velocity_recent: false,
+            commb_context: Default::default(),
         };
         let (own_alt_ft, mb) = match msg.body {
             Body::Altitude { alt_ft, mb, .. } => (alt_ft, mb),
@@ -307,7 +307,7 @@ impl Decoder {
             ac.commb.note(&inference, t);
             self.stats.commb.count(&inference);
             out.commb = Some(inference);
-            out.adsb_velocity_recent = ac.commb.adsb_velocity_recent(t);
+            out.commb_context = ac.commb.context(t, own_alt_ft);
             return Ok(out);
         }
         if let Body::Extended(es) = msg.body {

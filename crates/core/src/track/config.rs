@@ -136,6 +136,10 @@ pub struct TrackConfig {
     /// velocity feed their tracks as velocity measurements, and their heading
     /// and speed reports' vertical rates (BDS 6,0) as climb rates.
     pub commb_velocity: bool,
+    /// With `commb_velocity`: heading and speed reports' heading and
+    /// airspeed too, through the wind, magnetic variation and temperature
+    /// learnt from the aircraft that also report their velocity by ADS-B.
+    pub commb_heading: bool,
     /// Variational-Bayes scale of each source's measurement noise.
     pub vb: bool,
     /// Per-measurement forgetting factor of the VB estimate of MLAT fixes'
@@ -201,6 +205,7 @@ impl Default for TrackConfig {
             adsb_time_sigma_arrival_s: 0.1,
             mlat_sync_inflation: 4.0,
             commb_velocity: true,
+            commb_heading: true,
             vb: true,
             vb_forgetting: 0.95,
             vb_forgetting_adsb: 0.98,

@@ -256,7 +256,8 @@ pub fn simulate(s: &Scenario, capture: impl Write, truth: impl Write) -> Result<
         .iter()
         .enumerate()
         .map(|(i, a)| {
-            Transmitter::new(a, s.interrogation_hz, &s.commb, s.baro_offset_m, rng(s.seed, 20_000 + i as u64))
+            let rng = rng(s.seed, 20_000 + i as u64);
+            Transmitter::new(a, s.interrogation_hz, &s.commb, s.baro_offset_m, &s.air, rng)
         })
         .collect();
 

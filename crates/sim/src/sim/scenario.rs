@@ -80,6 +80,11 @@ pub struct Scenario {
     /// ("2,0", "4,0", "5,0", "6,0"): what the interrogators ask for.
     #[serde(default = "default_commb", deserialize_with = "commb_registers")]
     pub commb: Vec<Bds>,
+    /// The air the aircraft fly through (still, ISA, no magnetic variation
+    /// when absent): what makes heading and airspeed differ from track and
+    /// ground speed in the Comm-B registers.
+    #[serde(default)]
+    pub air: Air,
     #[serde(default)]
     pub receiver: Vec<Receiver>,
     #[serde(default)]
@@ -88,6 +93,57 @@ pub struct Scenario {
     pub aircraft: Vec<Aircraft>,
     #[serde(default)]
     pub traffic: Vec<Traffic>,
+}
+
+/// Wind, magnetic variation and temperature, the same over the whole
+/// airspace; the wind varies with height.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Air {
+    /// The wind at heights, interpolated linearly between them and constant
+    /// beyond; in ascending height.
+    #[serde(default)]
+    pub wind: Vec<WindAt>,
+    /// East of true north is positive: a magnetic heading is the true
+    /// heading minus it.
+    #[serde(default)]
+    pub magnetic_variation_deg: f64,
+    /// The air's temperature minus ISA's at every height (deg C).
+    #[serde(default)]
+    pub isa_deviation_c: f64,
+}
+
+/// The wind at one height: the velocity of the air (blowing towards east
+/// and north), not the meteorological "from" direction.
+#[derive(Clone, Copy, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WindAt {
+    #[serde(deserialize_with = "altitude")]
+    pub alt_m: f64,
+    #[serde(deserialize_with = "wind_speed")]
+    pub east_ms: f64,
+    #[serde(deserialize_with = "wind_speed")]
+    pub north_ms: f64,
+}
+
+fn wind_speed<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    checked(d, |v| v.abs() <= 150.0, "a wind component in m/s (-150..150)")
+}
+
+impl Air {
+    /// The wind (east, north; m/s) at height `alt_m`.
+    pub fn wind_at(&self, alt_m: f64) -> [f64; 2] {
+        let w = &self.wind;
+        match w.iter().position(|p| p.alt_m > alt_m) {
+            None => w.last().map_or([0.0; 2], |p| [p.east_ms, p.north_ms]),
+            Some(0) => [w[0].east_ms, w[0].north_ms],
+            Some(i) => {
+                let (a, b) = (w[i - 1], w[i]);
+                let f = (alt_m - a.alt_m) / (b.alt_m - a.alt_m);
+                [a.east_ms + f * (b.east_ms - a.east_ms), a.north_ms + f * (b.north_ms - a.north_ms)]
+            }
+        }
+    }
 }
 
 fn default_commb() -> Vec<Bds> {
@@ -353,6 +409,12 @@ impl Scenario {
     }
 
     fn validate(&self) -> Result<()> {
+        if self.air.wind.windows(2).any(|w| w[1].alt_m <= w[0].alt_m) {
+            bail!("air: the wind's heights must ascend");
+        }
+        if self.air.magnetic_variation_deg.abs() > 180.0 || self.air.isa_deviation_c.abs() > 60.0 {
+            bail!("air: magnetic variation beyond 180 degrees or ISA deviation beyond 60 degrees");
+        }
         let mut ids = std::collections::HashSet::new();
         for r in &self.receiver {
             if !ids.insert(r.id.as_str()) {
@@ -455,5 +517,21 @@ start = { lat = 43.7, lon = 1.4, alt_m = 3000.0, speed_mps = 120.0, heading_deg 
 
         let bad = format!("{MINIMAL}\n[[aircraft]]\nhex = \"4840D6\"\nstart = {{ lat = 1, lon = 1, alt_m = 1, speed_mps = 1, heading_deg = 1 }}\n");
         assert!(Scenario::parse(&bad, "m.toml").unwrap_err().to_string().contains("declared twice"));
+    }
+
+    #[test]
+    fn the_air_interpolated_and_checked() {
+        let air = "\n[air]\nmagnetic_variation_deg = -3.0\nwind = [\n  { alt_m = 0.0, east_ms = 4.0, north_ms = 0.0 },\n  { alt_m = 10000.0, east_ms = 44.0, north_ms = -10.0 },\n]\n";
+        let s = Scenario::parse(&format!("{MINIMAL}{air}"), "m.toml").unwrap();
+        assert_eq!(s.air.wind_at(-100.0), [4.0, 0.0]);
+        assert_eq!(s.air.wind_at(2_500.0), [14.0, -2.5]);
+        assert_eq!(s.air.wind_at(12_000.0), [44.0, -10.0]);
+        assert_eq!(Scenario::parse(MINIMAL, "m.toml").unwrap().air.wind_at(5_000.0), [0.0, 0.0]);
+        let down = air.replace("alt_m = 10000.0", "alt_m = -10.0");
+        let e = Scenario::parse(&format!("{MINIMAL}{down}"), "m.toml").unwrap_err().to_string();
+        assert!(e.contains("must ascend"), "{e}");
+        let gale = air.replace("east_ms = 44.0", "east_ms = 440.0");
+        let e = Scenario::parse(&format!("{MINIMAL}{gale}"), "m.toml").unwrap_err().to_string();
+        assert!(e.contains("not a wind component"), "{e}");
     }
 }

@@ -10,7 +10,7 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
-use super::scenario::Aircraft;
+use super::scenario::{Air, Aircraft};
 use super::trajectory::{Sample, Trajectory};
 use fuse1090_core::geo::{displace, FT_TO_M};
 use fuse1090_core::modes::commb::Bds;
@@ -63,6 +63,7 @@ pub struct Transmitter {
     gnss_t: f64,
     sigma_m: f64,
     baro_offset_m: f64,
+    air: Air,
     rng: ChaCha8Rng,
 }
 
@@ -82,6 +83,7 @@ impl Transmitter {
         default_interrogation_hz: f64,
         commb: &[Bds],
         baro_offset_m: f64,
+        air: &Air,
         mut rng: ChaCha8Rng,
     ) -> Self {
         let r = spec.rates;
@@ -122,6 +124,7 @@ impl Transmitter {
             gnss_t: spec.start_s,
             sigma_m,
             baro_offset_m,
+            air: air.clone(),
             rng,
         }
     }
@@ -230,8 +233,9 @@ impl Transmitter {
         // A transponder answers from its register, which the avionics refresh
         // every 1.3 s at the most (ICAO Doc 9871): the values are up to that old.
         let lag_s = self.rng.gen_range(0.0..fuse1090_core::modes::commb::REFRESH_S);
-        let filled = super::commb::register(bds, traj, t - lag_s, self.baro_offset_m);
+        let (air, baro) = (&self.air, self.baro_offset_m);
+        let filled = super::commb::register(bds, traj, t - lag_s, baro, air);
         // Just after the aircraft appeared, its state now.
-        filled.or_else(|| super::commb::register(bds, traj, t, self.baro_offset_m)).unwrap_or(0)
+        filled.or_else(|| super::commb::register(bds, traj, t, baro, air)).unwrap_or(0)
     }
 }

@@ -60,19 +60,31 @@ impl Front {
         }
         match d.commb {
             Some(Inference::Identified(Register::TrackTurn(r)))
-                if self.commb_velocity && !d.adsb_velocity_recent =>
+                if self.commb_velocity && !d.commb_context.adsb_velocity_recent() =>
             {
                 if let Some(m) = crate::core::commb::velocity(&r, arrival) {
                     self.stats.commb_velocities += 1;
                     out.push(Cmd::Measure { addr, nac_p: None, m, now: arrival });
                 }
             }
-            Some(Inference::Identified(Register::HeadingSpeed(r)))
-                if self.commb_velocity && !d.adsb_velocity_recent =>
-            {
-                if let Some(m) = crate::core::commb::climb(&r, arrival) {
-                    self.stats.commb_climbs += 1;
-                    out.push(Cmd::Measure { addr, nac_p: None, m, now: arrival });
+            Some(Inference::Identified(Register::HeadingSpeed(r))) if self.commb_velocity => {
+                let ctx = &d.commb_context;
+                match ctx.adsb_velocity {
+                    Some(v) => self.learn_wind(&r, ctx, v, arrival),
+                    None => {
+                        if let Some(m) = crate::core::commb::climb(&r, arrival) {
+                            self.stats.commb_climbs += 1;
+                            out.push(Cmd::Measure { addr, nac_p: None, m, now: arrival });
+                        }
+                        let heading = match self.commb_heading {
+                            true => crate::core::commb::heading_velocity(&r, ctx, &self.wind, arrival),
+                            false => None,
+                        };
+                        if let Some(m) = heading {
+                            self.stats.commb_headings += 1;
+                            out.push(Cmd::Measure { addr, nac_p: None, m, now: arrival });
+                        }
+                    }
                 }
             }
             Some(Inference::Identified(Register::SelectedVertical(r))) => {
@@ -133,6 +145,27 @@ impl Front {
             },
             _ => {}
         }
+    }
+
+    /// Learns the wind from an aircraft's heading and speed report and its
+    /// ADS-B velocity, when that is fresh (the two a second apart at most).
+    fn learn_wind(
+        &mut self,
+        r: &crate::modes::commb::Bds60,
+        ctx: &crate::modes::commb::ReplyContext,
+        v: crate::modes::commb::KnownVelocity,
+        arrival: f64,
+    ) {
+        /// ADS-B ground velocity's error per axis (m/s): 1 kt steps and NACv 1 or better.
+        const ADSB_SIGMA_MS: f64 = 1.0;
+        if v.age_s > 1.0 {
+            return;
+        }
+        let Some((air, alt_m)) = crate::core::commb::air_vector(r, ctx) else { return };
+        let (s, c) = v.track_deg.to_radians().sin_cos();
+        let ground = nalgebra::Vector2::new(s, c) * v.gs_kt * KT_TO_MS;
+        let cov = nalgebra::Matrix2::identity() * ADSB_SIGMA_MS.powi(2);
+        self.wind.learn(arrival, alt_m, &air, ground, cov, ctx.heading_reports);
     }
 
     /// The ADS-B position report of a decoded frame, if it has a published

@@ -22,7 +22,7 @@ pub mod registers;
 use smallvec::SmallVec;
 
 pub use json::CommbFields;
-pub use memory::{CommbStats, Memory};
+pub use memory::{CommbStats, Memory, ReplyContext};
 pub use registers::{Bds40, Bds44, Bds45, Bds50, Bds60, GICB_REGISTERS};
 
 /// The longest a transponder's register waits for the avionics to refresh
