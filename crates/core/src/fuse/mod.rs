@@ -45,6 +45,7 @@ use std::sync::Arc;
 
 use nalgebra::{Matrix2, Vector2};
 
+use crate::mlat::engine::TdoaGroup;
 use crate::track::imm::ImmSpec;
 use crate::track::motion::{Fix2, Motion, MotionTest};
 use crate::track::particle::SparseTrack;
@@ -60,6 +61,14 @@ pub use records::{Alert, FuseStats, Output, Sources, SparseStats, TrackReport, T
 
 /// Slower tracks (taxiing, parked) are left out of conflict prediction (m/s).
 pub const MIN_CONFLICT_SPEED_MPS: f64 = 30.0;
+
+/// An aircraft's time differences are counted over about this long (s):
+/// about the memory of a track made of them (a constant-velocity filter's,
+/// sqrt(2) (R / (r q))^(1/4), is 20 to 40 s for a time difference's
+/// hundreds of metres to a kilometre along the range, at two a second and
+/// a white acceleration of 1 m/s^2), so the span over which an error they
+/// share (a receiver's learnt offset) adds up in its estimate.
+const TDOA_SPAN_S: f64 = 30.0;
 
 /// Speed no aircraft reaches (m/s).
 pub const MAX_SPEED_MPS: f64 = 1_200.0;
@@ -99,6 +108,17 @@ struct Aircraft {
     sparse_due: f64,
     /// When its groups first came too small for a fix while it had no position.
     sparse_since: Option<f64>,
+    /// The cloud's estimates in a row that had one mode and were tight
+    /// enough to publish: at `sparse.handover_after` the tracks start from it.
+    sparse_publishable: u32,
+    /// Its tracks started from a particle cloud and have had no fix since:
+    /// published flagged `sparse`, and given back to a new cloud if the time
+    /// differences keep missing them.
+    sparse_geometry: bool,
+    sparse_gated: u32,
+    /// Its transmissions taken as time differences, decayed over
+    /// [`TDOA_SPAN_S`], and the newest one's time.
+    tdoa_recent: (f64, f64),
     motion: MotionTest,
     motion_plane: Option<Plane>,
     motion_state: Motion,
@@ -326,6 +346,10 @@ impl Fuser {
                     sparse: None,
                     sparse_due: f64::NEG_INFINITY,
                     sparse_since: None,
+                    sparse_publishable: 0,
+                    sparse_geometry: false,
+                    sparse_gated: 0,
+                    tdoa_recent: (0.0, f64::NEG_INFINITY),
                     motion: self.motion.clone(),
                     motion_plane: None,
                     motion_state: Motion::Unknown,
@@ -428,11 +452,15 @@ impl Fuser {
 
     /// A transmission too few receivers heard for a fix: its time differences
     /// go into the tracks of an aircraft already tracked (they cannot start one).
-    pub fn on_tdoa(&mut self, g: &crate::mlat::engine::TdoaGroup, now: f64, out: &mut Vec<Output>) {
+    pub fn on_tdoa(&mut self, g: &TdoaGroup, now: f64, out: &mut Vec<Output>) {
         if !(2..=3).contains(&g.sites.len()) {
             return;
         }
         let Some(a) = self.aircraft.get_mut(&g.addr) else { return };
+        let (count, then) = a.tdoa_recent;
+        let recent = count * (-(g.t - then).abs() / TDOA_SPAN_S).exp() + 1.0;
+        a.tdoa_recent = (recent, g.t);
+        let g = &TdoaGroup { sites: g.sites_for(recent, TDOA_SPAN_S), ..g.clone() };
         if !a.fused.has_position() {
             return self.sparse_tdoa(g, now, out);
         }

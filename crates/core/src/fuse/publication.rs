@@ -79,7 +79,7 @@ impl Fuser {
             flight: a.flight.clone(),
             squawk: a.squawk,
             nav_altitude_ft: a.nav_altitude_ft,
-            sparse: false,
+            sparse: a.sparse_geometry,
             ages_s: [Source::Adsb, Source::Mlat].map(|s| Some(age(s).max(0.0)).filter(|age| *age <= window)),
         };
         if let Some(est) = fused {

@@ -123,6 +123,11 @@ pub struct SparseStats {
     pub published: u64,
     /// Clouds given up for the aircraft's first fix.
     pub handed_over: u64,
+    /// Clouds whose one mode the tracks took over (before any fix).
+    pub handed_over_one_mode: u64,
+    /// Tracks taken over from a cloud that the time differences then kept
+    /// missing: dropped for a new cloud.
+    pub given_back: u64,
     /// Aircraft not given a filter: as many as `max_filters` were running.
     pub refused: u64,
 }
@@ -157,8 +162,16 @@ impl std::fmt::Display for FuseStats {
             write!(
                 f,
                 "; sparse geometry: {} particle filters ({} refused, table full), {} updates, {} restarts, \
-                 {} published, {} handed over, {} groups without a height",
-                s.started, s.refused, s.updates, s.restarts, s.published, s.handed_over, s.no_height
+                 {} published, {} handed over at a fix, {} at one mode ({} given back), {} groups without a height",
+                s.started,
+                s.refused,
+                s.updates,
+                s.restarts,
+                s.published,
+                s.handed_over,
+                s.handed_over_one_mode,
+                s.given_back,
+                s.no_height
             )?;
         }
         Ok(())

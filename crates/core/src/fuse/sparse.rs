@@ -1,15 +1,21 @@
 //! Aircraft heard by too few receivers for a fix: their time differences
-//! feed a particle filter ([`crate::track::particle`]) until a fix gives the
-//! aircraft a track, and its estimate is published, flagged `sparse`, while
-//! the cloud has one mode and is tight enough to say where the aircraft is.
+//! feed a particle filter ([`crate::track::particle`]), and its estimate is
+//! published, flagged `sparse`, while the cloud has one mode and is tight
+//! enough to say where the aircraft is. Once it has been so for a few
+//! estimates in a row, or a fix comes, the aircraft's Gaussian tracks take
+//! over: started from the cloud's mean and covariance, they take the time
+//! differences from then on (an unscented update, which one mode and a few
+//! kilometres of spread allow) and are published flagged `sparse` until the
+//! first fix. Tracks the time differences keep missing were started from a
+//! wrong cloud: they are dropped and a new cloud starts.
 
 use super::{Fuser, Output, TrackReport};
 use crate::fuse::TrackSource;
 use crate::mlat::engine::TdoaGroup;
-use crate::track::measurement::Source;
+use crate::track::measurement::{Measurement, Observation, Outcome, Source};
 use crate::track::motion::Motion;
 use crate::track::particle::{SparseOutcome, SparseTrack};
-use crate::track::Estimate;
+use crate::track::{Estimate, Track};
 
 /// A height older than this does not place the aircraft on its surface (s).
 const HEIGHT_MAX_AGE_S: f64 = 30.0;
@@ -62,14 +68,32 @@ impl Fuser {
         if g.t < a.sparse_due {
             return;
         }
-        let Some((plane, gauss)) = s.publishable(cfg.publish_sigma_m) else { return };
+        let Some((plane, gauss)) = s.publishable(cfg.publish_sigma_m) else {
+            a.sparse_publishable = 0;
+            return;
+        };
+        let t = s.t;
+        a.sparse_publishable += 1;
+        if cfg.handover_after > 0 && a.sparse_publishable >= cfg.handover_after {
+            // The tracks start where the cloud is; the cloud goes.
+            // (The single-source tracks only where they run.)
+            let singles = if self.singles { &mut a.single[..] } else { &mut [] };
+            for track in std::iter::once(&mut a.fused).chain(singles) {
+                track.start_from(t, plane, &gauss);
+            }
+            a.sparse = None;
+            a.sparse_geometry = true;
+            a.sparse_gated = 0;
+            self.sparse_active -= 1;
+            stats.handed_over_one_mode += 1;
+        }
         a.sparse_due = g.t + period;
         stats.published += 1;
         out.push(Output::Track(Box::new(TrackReport {
             id: a.id,
             addr: g.addr,
             source: TrackSource::Fused,
-            est: Estimate::new(s.t, plane, gauss, Some(h), 0.0),
+            est: Estimate::new(t, plane, gauss, Some(h), 0.0),
             alt_baro_ft: a.alt_baro_ft,
             sources: smallvec::smallvec![Source::Mlat],
             nac_p: None,
@@ -82,5 +106,44 @@ impl Fuser {
             sparse: true,
             ages_s: [None, Some(0.0)],
         })));
+    }
+}
+
+impl Fuser {
+    /// A measurement's outcome for tracks started from a particle cloud:
+    /// a position (a fix, ADS-B) ends their sparse geometry; time
+    /// differences gated `max_gated_in_a_row` times in a row mean the cloud
+    /// was wrong, and the aircraft goes back to a new one.
+    pub(super) fn sparse_geometry(&mut self, addr: u32, m: &Measurement, outcome: Outcome) {
+        let Some(a) = self.aircraft.get_mut(&addr) else { return };
+        match (m.obs, outcome) {
+            (Observation::Position { .. }, Outcome::Applied { .. } | Outcome::Restarted) => {
+                a.sparse_geometry = false;
+            }
+            (Observation::Tdoa { .. }, Outcome::Applied { .. }) => a.sparse_gated = 0,
+            (Observation::Tdoa { .. }, Outcome::Gated) => {
+                a.sparse_gated += 1;
+                if a.sparse_gated >= self.tcfg.max_gated_in_a_row {
+                    let spec = self.spec_mlat_only.clone();
+                    let keep_gain = a.single[0].keep_gain;
+                    a.fused = Track::new(self.tcfg.clone(), spec.clone());
+                    for single in &mut a.single {
+                        *single = Track::new(self.tcfg.clone(), spec.clone());
+                        single.keep_gain = keep_gain;
+                    }
+                    a.sparse_geometry = false;
+                    a.sparse_publishable = 0;
+                    a.sparse_gated = 0;
+                    // A new cloud from the next time differences, at once.
+                    a.sparse_since = Some(f64::NEG_INFINITY);
+                    self.stats.sparse.given_back += 1;
+                    tracing::info!(
+                        hex = format!("{addr:06X}"),
+                        "tracks started from a particle cloud lost the aircraft: a new cloud starts"
+                    );
+                }
+            }
+            _ => {}
+        }
     }
 }

@@ -329,14 +329,23 @@ fn a_track_mlat_stops_feeding_goes_out_at_once_again() {
 
 /// Time differences of the test flight at `t` at three sites 30 km around its start.
 fn tdoa(addr: u32, t: f64) -> crate::mlat::engine::TdoaGroup {
-    let (lat, lon, h) = at(t);
+    tdoa_from(addr, t, at(t))
+}
+
+/// Time differences at `t` of an aircraft at `(lat, lon, h)`.
+fn tdoa_from(addr: u32, t: f64, (lat, lon, h): (f64, f64, f64)) -> crate::mlat::engine::TdoaGroup {
     let p = crate::geo::geodetic_to_ecef(lat, lon, h);
     let sites = [[0.0, 30_000.0], [26_000.0, -15_000.0], [-26_000.0, -15_000.0]].map(|[e, n]| {
         let (la, lo, ha) = crate::geo::displace(45.0, 5.0, 100.0, [e, n, 0.0]);
         let s = crate::geo::geodetic_to_ecef(la, lo, ha);
         (s, t + crate::geo::ecef_distance(p, s) / crate::mlat::solver::C_AIR, 50e-9)
     });
-    crate::mlat::engine::TdoaGroup { addr, t, sites: sites.to_vec() }
+    crate::mlat::engine::TdoaGroup {
+        addr,
+        t,
+        sites: sites.to_vec(),
+        persistent: vec![(0.0, 0.0); sites.len()],
+    }
 }
 
 #[test]
@@ -346,6 +355,8 @@ fn particle_filters_are_bounded_and_give_way_to_a_fix() {
     tcfg.sparse.max_filters = 1;
     // A filter starts once an aircraft's groups have been too small for a fix for 1 s.
     tcfg.sparse.start_after_s = 1.0;
+    // Given up at a fix only (the one-mode handover is the next test's).
+    tcfg.sparse.handover_after = 0;
     let mut f = Fuser::new(FuseConfig::default(), tcfg, false);
     let mut out = Vec::new();
     let height =
@@ -364,6 +375,68 @@ fn particle_filters_are_bounded_and_give_way_to_a_fix() {
     f.on_tdoa(&tdoa(2, 103.5), 103.5, &mut out);
     let s = f.stats().sparse;
     assert_eq!((s.handed_over, s.started), (1, 2), "{s:?}");
+}
+
+/// A cloud with one mode for three estimates in a row: the Gaussian tracks
+/// start from it, take the time differences, are confirmed by them and
+/// published flagged `sparse`, until a fix; time differences that keep
+/// missing a track started from a cloud send the aircraft back to a new one.
+#[test]
+fn a_one_peaked_cloud_hands_over_and_a_wrong_start_is_given_back() {
+    let mut tcfg = TrackConfig::default();
+    tcfg.sparse.enabled = true;
+    tcfg.sparse.start_after_s = 1.0;
+    let mut f = Fuser::new(FuseConfig::default(), tcfg, false);
+    let mut out = Vec::new();
+    let height =
+        |t| Measurement { t, source: Source::Mlat, obs: Observation::Height { h: 3000.0, var: 100.0 } };
+    let mut t = 99.0;
+    while t < 130.0 {
+        f.on_measurement(1, None, height(t), t, &mut out);
+        f.on_tdoa(&tdoa(1, t), t, &mut out);
+        f.advance(t, &mut out);
+        t += 0.5;
+    }
+    let s = f.stats().sparse;
+    assert_eq!((s.handed_over_one_mode, s.given_back), (1, 0), "{s:?}");
+    let sparse_tracks = |out: &[Output]| -> Vec<(f64, f64)> {
+        (out.iter())
+            .filter_map(|o| match o {
+                Output::Track(r) if r.sparse => Some((r.est.t, r.est.lat)),
+                _ => None,
+            })
+            .collect()
+    };
+    // Published through the handover and after, from the Gaussian track.
+    let published = sparse_tracks(&out);
+    assert!(published.iter().filter(|(t, _)| *t > 115.0).count() >= 10, "{published:?}");
+    // A fix: the track is no longer a sparse-geometry one.
+    out.clear();
+    f.on_measurement(1, None, fix(130.0), 130.0, &mut out);
+    for k in 1..6 {
+        let t = 130.0 + k as f64;
+        f.on_tdoa(&tdoa(1, t), t, &mut out);
+        f.on_measurement(1, None, fix(t), t, &mut out);
+        f.advance(t, &mut out);
+    }
+    assert!(sparse_tracks(&out).is_empty());
+    assert!(out.iter().any(|o| matches!(o, Output::Track(r) if !r.sparse)));
+
+    // Aircraft 2 is handed over, then its time differences jump 30 km away
+    // (as if the cloud had taken the wrong side): given back.
+    let (mut t, mut out) = (99.0, Vec::new());
+    while f.stats().sparse.handed_over_one_mode < 2 && t < 140.0 {
+        f.on_measurement(2, None, height(t), t, &mut out);
+        f.on_tdoa(&tdoa(2, t), t, &mut out);
+        t += 0.5;
+    }
+    assert_eq!(f.stats().sparse.handed_over_one_mode, 2);
+    for _ in 0..20 {
+        f.on_measurement(2, None, height(t), t, &mut out);
+        f.on_tdoa(&tdoa_from(2, t, at(t + 150.0)), t, &mut out);
+        t += 0.5;
+    }
+    assert_eq!(f.stats().sparse.given_back, 1, "{:?}", f.stats().sparse);
 }
 
 /// A cluster's checkpoint reserves track numbers: an aircraft whose track

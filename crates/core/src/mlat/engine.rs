@@ -127,6 +127,10 @@ struct Rx {
     /// Recent share of its copies whose time jumped (a counter that
     /// restarted, a GPS time off by whole seconds from the others').
     jumps: f64,
+    /// When its offset last learnt from a fix (server time), and the mean
+    /// time between its lessons: how long an error of its offset lasts.
+    offset_learnt_t: Option<f64>,
+    lesson_interval_s: f64,
 }
 
 /// GPS-timed copies of one transmission further apart than this (s) cannot
@@ -166,6 +170,29 @@ impl Rx {
 
     fn bias(&self) -> f64 {
         self.timing.offset()
+    }
+
+    /// Its learnt offset's error at `now`: the variance (s^2) and how long
+    /// (s) that error lasts, from now on, before its lessons replace it (a
+    /// receiver no fix has taught for a while keeps its error that much
+    /// longer). None when its timing is given.
+    fn offset_error(&self, now: f64) -> Option<(f64, f64)> {
+        if self.timing_known {
+            return None;
+        }
+        let idle = self.offset_learnt_t.map_or(f64::INFINITY, |t| (now - t).max(0.0));
+        let lasts = self.lesson_interval_s * TimingModel::OFFSET_MEMORY + idle;
+        Some((self.timing.offset_var(), lasts))
+    }
+
+    /// A lesson taught at `now`.
+    fn lesson_at(&mut self, now: f64) {
+        /// Weight of each interval in the mean interval between lessons.
+        const WEIGHT: f64 = 0.05;
+        if let Some(t) = self.offset_learnt_t {
+            self.lesson_interval_s += WEIGHT * ((now - t).max(0.0) - self.lesson_interval_s);
+        }
+        self.offset_learnt_t = Some(now);
     }
 }
 
@@ -284,6 +311,8 @@ impl Mlat {
             last_seen: None,
             gps_partner: None,
             jumps: 0.0,
+            offset_learnt_t: None,
+            lesson_interval_s: 1.0,
             timing: TimingModel::prior(jitter * 1e-9),
             timing_known: false,
             misplaced: false,
@@ -390,7 +419,7 @@ impl Mlat {
         // receivers synchronised yet).
         let ambiguous = !too_few && g.ms.len() + alt.is_some() as usize == 4 && guess.is_none();
         if too_few || ambiguous {
-            return self.short_of_fix(&info, &g.ms, &arrivals, too_few, now);
+            return self.short_of_fix(&info, &g, &arrivals, too_few, now);
         }
         let solved = self.solve_robust(&mut g, alt, guess);
         let (fix, judged) = match solved {
@@ -468,11 +497,12 @@ impl Mlat {
     fn short_of_fix(
         &mut self,
         info: &GroupInfo,
-        ms: &[Measurement],
+        g: &robust::GroupCopies,
         arrivals: &[f64],
         too_few: bool,
         now: f64,
     ) -> GroupOutcome {
+        let ms = &g.ms;
         let why = if too_few {
             self.stats.too_few_receivers += 1;
             NoFix::TooFewReceivers
@@ -487,6 +517,10 @@ impl Mlat {
                 addr: info.addr,
                 t: first,
                 sites: ms.iter().map(|m| (m.pos, m.t, m.sigma_t)).collect(),
+                // A merged site's is its first receiver's (the others' are alike).
+                persistent: (g.sites.iter())
+                    .map(|site| self.rxs[site[0]].offset_error(now).unwrap_or((0.0, 0.0)))
+                    .collect(),
             });
         }
         GroupOutcome::NoFix(why)

@@ -168,6 +168,15 @@ impl TimingModel {
         self.n >= MIN_RESIDUALS
     }
 
+    /// The variance (s^2) of the learnt offset's error: what an exponential
+    /// average of the core's residuals with [`OFFSET_STEP`] wanders by.
+    pub fn offset_var(&self) -> f64 {
+        self.var_s2 * OFFSET_STEP / (2.0 - OFFSET_STEP)
+    }
+
+    /// How many residuals an error of the learnt offset lasts for.
+    pub const OFFSET_MEMORY: f64 = 1.0 / OFFSET_STEP;
+
     /// A leave-one-out residual `d` (s, measured minus the others' model,
     /// its offset already removed) whose core variance is `var_s2`
     /// (receiver, sync and the others' prediction together).

@@ -61,6 +61,11 @@ pub struct SparseConfig {
     /// fix this long (s): most aircraft entering coverage are fixed within
     /// seconds, and a filter costs about a millisecond to start.
     pub start_after_s: f64,
+    /// The aircraft's Gaussian tracks take over from the cloud once this
+    /// many of its estimates in a row (one a second) were publishable: one
+    /// might be a cloud passing through one mode on its way between two.
+    /// 0: only at the aircraft's first fix.
+    pub handover_after: u32,
 }
 
 impl Default for SparseConfig {
@@ -77,6 +82,7 @@ impl Default for SparseConfig {
             publish_sigma_m: 3_000.0,
             max_filters: 500,
             start_after_s: 10.0,
+            handover_after: 3,
         }
     }
 }

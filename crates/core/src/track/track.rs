@@ -239,8 +239,18 @@ impl Track {
             }
             o
         };
-        if let Observation::Position { .. } = m.obs {
-            self.record_hit(matches!(outcome, Outcome::Applied { .. } | Outcome::Restarted), m.t);
+        match (m.obs, outcome) {
+            (Observation::Position { .. }, _) => {
+                self.record_hit(matches!(outcome, Outcome::Applied { .. } | Outcome::Restarted), m.t)
+            }
+            // Time differences confirm a track they can update (one started
+            // from a particle cloud): accepted as a position is, or gated.
+            (Observation::Tdoa { .. }, Outcome::Applied { .. } | Outcome::Gated) => self.lifecycle.record(
+                matches!(outcome, Outcome::Applied { .. }),
+                self.cfg.confirm_m,
+                self.cfg.confirm_n,
+            ),
+            _ => {}
         }
         // Older entries go, up to the next copy, once that copy is older
         // than the window (or there are too many): the oldest kept always

@@ -270,6 +270,7 @@ impl Mlat {
             return;
         }
         for rx in lessons.finish(&mut self.rxs) {
+            self.rxs[rx].lesson_at(now);
             self.sync.set_gps_bias(rx, self.rxs[rx].bias());
         }
     }

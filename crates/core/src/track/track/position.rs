@@ -171,6 +171,30 @@ impl Track {
         }
     }
 
+    /// Starts the track at `t` from an estimate made elsewhere (a particle
+    /// cloud with one mode): its position and velocity, in `plane`, with
+    /// their covariance; the acceleration unknown, as at any start. What the
+    /// track took before (heights, Comm-B velocities) stays in its vertical
+    /// channel; its history of measurements goes, as a measurement older
+    /// than the start can no longer be put in its place.
+    pub fn start_from(&mut self, t: f64, plane: Plane, g: &Gaussian) {
+        let va = INIT_ACCEL_SIGMA * INIT_ACCEL_SIGMA;
+        let mut p = g.p;
+        p[(4, 4)] = va;
+        p[(5, 5)] = va;
+        self.state.plane = Some(plane);
+        let spec = Self::spec_at(&self.specs, t).clone();
+        self.state.imm = Some(Imm::with_spec(spec, Gaussian { x: g.x, p }));
+        self.state.t = self.state.t.max(t);
+        self.state.t_h = t;
+        self.state.gated_in_a_row = 0;
+        self.state.accepted_since_start = 0;
+        for noise in &mut self.state.noise {
+            noise.covered_now();
+        }
+        self.history.clear();
+    }
+
     /// `x`: the filter's newest combined estimate.
     pub(super) fn maybe_recentre(&mut self, x: &Vector6<f64>) {
         let (Some(plane), Some(imm)) = (self.state.plane, self.state.imm.as_mut()) else {
