@@ -72,8 +72,34 @@ pub(super) fn front_metrics(
             }
         }
     }
+    air_metrics(front);
     if let Some(r) = recording {
         record_metrics(r);
+    }
+}
+
+/// What heading reports taught of the air (absent until they taught
+/// anything): the magnetic variation, the wind each kilometre up, its
+/// spread across the region, and the lessons and outliers counted.
+fn air_metrics(front: &Front) {
+    let w = front.wind();
+    if w.stats.learnt == 0 {
+        return;
+    }
+    metrics::counter!("fuse1090_air_lessons_total").absolute(w.stats.learnt);
+    metrics::counter!("fuse1090_air_outliers_total").absolute(w.stats.outliers);
+    metrics::counter!("fuse1090_commb_heading_velocities_total").absolute(front.stats().commb_headings);
+    let (variation, sigma) = w.variation_deg();
+    metrics::gauge!("fuse1090_air_magnetic_variation_deg").set(variation);
+    metrics::gauge!("fuse1090_air_magnetic_variation_sigma_deg").set(sigma);
+    metrics::gauge!("fuse1090_air_wind_spread_ms").set(w.scatter_ms());
+    for km in 1..=15u32 {
+        let (v, s) = w.wind_at(km as f64 * 1000.0);
+        for (axis, name) in ["east", "north"].into_iter().enumerate() {
+            let labels = [("alt_km", km.to_string()), ("component", name.to_string())];
+            metrics::gauge!("fuse1090_air_wind_ms", &labels).set(v[axis]);
+            metrics::gauge!("fuse1090_air_wind_sigma_ms", &labels).set(s[axis]);
+        }
     }
 }
 
