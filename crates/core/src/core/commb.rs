@@ -59,6 +59,8 @@ const MACH_STEP: f64 = 0.004;
 const AIRSPEED_SIGMA_MS: f64 = 1.5;
 /// The heading reference's own error (deg, 1 sigma).
 const HEADING_SIGMA_DEG: f64 = 0.5;
+/// An altitude older than this (s) does not convert a heading report's airspeeds.
+const MAX_ALTITUDE_AGE_S: f64 = 5.0;
 /// A prediction weaker than this (m/s, per axis, 1 sigma) tells a track
 /// nothing its positions do not: the wind is not learnt yet.
 const MAX_USEFUL_SIGMA_MS: f64 = 15.0;
@@ -70,7 +72,10 @@ const MAX_USEFUL_SIGMA_MS: f64 = 15.0;
 /// `None` without a heading, an airspeed or an altitude.
 pub fn air_vector(r: &Bds60, ctx: &ReplyContext) -> Option<(AirVector, f64)> {
     let heading_deg = r.mag_heading_deg?;
-    let (alt_ft, _) = ctx.known.alt_ft?;
+    // The altitude sets the airspeed's conversion (2% of true airspeed per
+    // 1,000 ft): an identity reply's, remembered, only while an aircraft
+    // changing level cannot have left it far.
+    let (alt_ft, _) = ctx.known.alt_ft.filter(|&(_, age_s)| age_s <= MAX_ALTITUDE_AGE_S)?;
     let alt_ft = alt_ft as f64;
     let sound = air::speed_of_sound_ms(alt_ft);
     let (tas, step) = match (r.ias_kt, r.mach) {

@@ -113,9 +113,10 @@ impl Fuser {
     /// A measurement's outcome for tracks started from a particle cloud:
     /// a position (a fix, ADS-B) ends their sparse geometry; time
     /// differences gated `max_gated_in_a_row` times in a row mean the cloud
-    /// was wrong, and the aircraft goes back to a new one.
-    pub(super) fn sparse_geometry(&mut self, addr: u32, m: &Measurement, outcome: Outcome) {
-        let Some(a) = self.aircraft.get_mut(&addr) else { return };
+    /// was wrong, and the aircraft goes back to a new one (returns whether
+    /// it did).
+    pub(super) fn sparse_geometry(&mut self, addr: u32, m: &Measurement, outcome: Outcome) -> bool {
+        let Some(a) = self.aircraft.get_mut(&addr) else { return false };
         match (m.obs, outcome) {
             (Observation::Position { .. }, Outcome::Applied { .. } | Outcome::Restarted) => {
                 a.sparse_geometry = false;
@@ -141,9 +142,11 @@ impl Fuser {
                         hex = format!("{addr:06X}"),
                         "tracks started from a particle cloud lost the aircraft: a new cloud starts"
                     );
+                    return true;
                 }
             }
             _ => {}
         }
+        false
     }
 }

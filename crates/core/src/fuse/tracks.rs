@@ -58,12 +58,10 @@ impl Fuser {
             Outcome::Restarted => self.stats.restarts += 1,
             _ => {}
         }
-        if a.sparse_geometry {
-            self.sparse_geometry(addr, &m, outcome);
-            let Some(a) = self.aircraft.get_mut(&addr) else { return };
-            if !a.fused.has_position() {
-                return;
-            }
+        // Tracks started from a particle cloud and given back to a new one
+        // have nothing more to do.
+        if a.sparse_geometry && self.sparse_geometry(addr, &m, outcome) {
+            return;
         }
         let Some(a) = self.aircraft.get_mut(&addr) else { return };
         if !matches!(m.obs, Observation::Position { .. } | Observation::Tdoa { .. }) {
