@@ -2,7 +2,8 @@
 //! network-rough-ehs (a windy day; ADS-B aircraft that also answer with
 //! heading reports) replayed into its Beast server, each receiver from its
 //! own loopback address, and the magnetic variation and wind it learnt on the
-//! Prometheus endpoint, against the scenario's.
+//! Prometheus endpoint, against the scenario's; kept in the state file and
+//! taken up by the next run.
 
 mod common;
 
@@ -31,9 +32,12 @@ fn the_daemon_learns_the_air_from_heading_reports() {
     std::fs::write(&capture_path, capture).unwrap();
 
     let metrics = std::net::SocketAddr::from(([127, 0, 0, 1], common::free_port()));
+    let state = work.path().join("state.json");
     let mut cfg = format!(
-        "[service]\ndemo_capture = \"{}\"\ndemo_speed = 8.0\nstats_interval_s = 1.0\nmetrics_listen = \"{metrics}\"\n\n",
-        capture_path.display()
+        "[service]\ndemo_capture = \"{}\"\ndemo_speed = 8.0\nstats_interval_s = 1.0\nmetrics_listen = \"{metrics}\"\n\
+         state_file = \"{}\"\n\n",
+        capture_path.display(),
+        state.display()
     );
     for (k, r) in scenario.receiver.iter().enumerate() {
         let clock = serde_json::to_value(r.clock).unwrap();
@@ -84,4 +88,33 @@ fn the_daemon_learns_the_air_from_heading_reports() {
         assert!((w - true_wind[axis]).abs() < (4.0 * s).max(2.0), "{c}: {w} +- {s} against {true_wind:?}");
     }
     assert!(metric(&text, "fuse1090_commb_heading_velocities_total").is_some_and(|n| n > 0.0), "{text}");
+
+    // Kept, and taken up by a run that has heard nothing yet.
+    let saved: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&state).unwrap()).unwrap();
+    let x = saved["air"]["x"].as_array().expect("the air kept");
+    // (Learnt on until the daemon stopped: the saved variation is the last.)
+    let (p, q) = (x[0].as_f64().unwrap(), x[1].as_f64().unwrap());
+    let variation = q.atan2(p).to_degrees();
+    assert!((variation - truth).abs() < 0.5, "{variation}");
+    let cfg = std::fs::read_to_string(&cfg_path).unwrap();
+    let quiet = cfg.lines().filter(|l| !l.starts_with("demo_")).collect::<Vec<_>>().join("\n");
+    std::fs::write(&cfg_path, quiet).unwrap();
+    let log = work.path().join("again.log");
+    let mut child = daemon(&cfg_path, &log, None);
+    wait_for_log(&log, "learnt state taken up");
+    let t0 = Instant::now();
+    let mut again = String::new();
+    while metric(&again, "fuse1090_air_magnetic_variation_deg").is_none()
+        && t0.elapsed() < Duration::from_secs(10)
+    {
+        std::thread::sleep(Duration::from_millis(300));
+        again = scrape(metrics);
+    }
+    signal(&child, "TERM");
+    assert!(exit_within(&mut child, Duration::from_secs(10)).is_some());
+    let restored = metric(&again, "fuse1090_air_magnetic_variation_deg");
+    assert!(
+        restored.is_some_and(|v| (v - variation).abs() < 1e-6),
+        "{restored:?} against {variation}:\n{again}"
+    );
 }

@@ -153,8 +153,8 @@ impl FrontThread {
         let Some(path) = &self.state_file else { return };
         match crate::mlat::state::LearntState::load(path) {
             Ok(Some(state)) => {
-                let n = self.front.mlat_mut().restore(&state);
-                tracing::info!(path = %path.display(), receivers = n, "learnt state taken up");
+                let (n, air) = self.front.restore(&state, unix_now());
+                tracing::info!(path = %path.display(), receivers = n, air, "learnt state taken up");
             }
             Ok(None) => tracing::info!(path = %path.display(), "no learnt state yet"),
             Err(e) => tracing::warn!("learnt state not taken up: {e}"),
@@ -297,7 +297,7 @@ impl FrontThread {
     fn finish(mut self) {
         self.front.finish(&mut self.cmds);
         if let Some(path) = &self.state_file {
-            match self.front.mlat().learnt(unix_now()).save(path) {
+            match self.front.learnt_state(unix_now()).save(path) {
                 Ok(()) => tracing::info!(path = %path.display(), "learnt state saved"),
                 Err(e) => tracing::error!(path = %path.display(), "learnt state not saved: {e}"),
             }

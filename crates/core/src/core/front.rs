@@ -497,6 +497,22 @@ impl Front {
         &self.wind
     }
 
+    /// What was learnt to keep across a restart (`[service] state_file`):
+    /// each receiver's timing and survey, and the air.
+    pub fn learnt_state(&self, saved_unix: f64) -> crate::mlat::state::LearntState {
+        let mut state = self.mlat.learnt(saved_unix);
+        state.air = self.wind.snapshot();
+        state
+    }
+
+    /// Takes up what a previous run learnt at `now` (Unix s): how many
+    /// receivers' timing, and whether the air's.
+    pub fn restore(&mut self, state: &crate::mlat::state::LearntState, now: f64) -> (usize, bool) {
+        let receivers = self.mlat.restore(state);
+        let air = state.air.as_ref().is_some_and(|a| self.wind.restore(a, now));
+        (receivers, air)
+    }
+
     /// One line on the air learnt from heading reports (`None` if nothing
     /// was): the magnetic variation, the wind at a few heights, its spread.
     pub fn air_report(&self) -> Option<String> {

@@ -26,6 +26,8 @@
 
 use nalgebra::{DMatrix, DVector, Matrix2, Vector2};
 
+use crate::mlat::state::AirSnapshot;
+
 /// Layer thickness (m) and how many (from the ground up to 16,000 m).
 const LAYER_M: f64 = 1000.0;
 const LAYERS: usize = 16;
@@ -231,6 +233,40 @@ impl WindField {
     pub fn scatter_ms(&self) -> f64 {
         self.scatter_var.sqrt()
     }
+
+    /// What was learnt, to be kept across a restart (`None` before anything was).
+    pub fn snapshot(&self) -> Option<AirSnapshot> {
+        (self.stats.learnt > 0).then(|| AirSnapshot {
+            x: self.x.iter().copied().collect(),
+            p: self.p.transpose().iter().copied().collect(),
+            scatter_var: self.scatter_var,
+            t: self.t.unwrap_or(0.0),
+            learnt: self.stats.learnt,
+        })
+    }
+
+    /// Takes up what a previous run learnt, the winds having drifted since
+    /// (to `now`, Unix s); false, and nothing taken, for a snapshot of
+    /// another shape or with values no learner makes.
+    pub fn restore(&mut self, s: &AirSnapshot, now: f64) -> bool {
+        let sane = s.x.len() == N
+            && s.p.len() == N * N
+            && s.x.iter().chain(&s.p).all(|v| v.is_finite())
+            && (0..N).all(|i| s.p[i * N + i] >= 0.0)
+            && s.scatter_var.is_finite()
+            && s.scatter_var >= 0.0
+            && s.t.is_finite();
+        if !sane {
+            return false;
+        }
+        self.x = DVector::from_column_slice(&s.x);
+        self.p = DMatrix::from_row_slice(N, N, &s.p);
+        self.scatter_var = s.scatter_var;
+        self.t = Some(s.t);
+        self.stats.learnt = s.learnt;
+        self.advance(now);
+        true
+    }
 }
 
 fn to2(v: &DVector<f64>) -> Vector2<f64> {
@@ -288,6 +324,38 @@ mod tests {
         let err = p.v_en - truth(123.0, 230.0, 6_300.0);
         assert!((err.transpose() * cov.try_inverse().unwrap() * err)[0] < 9.0, "{err} {cov}");
         assert!(cov.trace().sqrt() < 3.0, "{cov}");
+    }
+
+    /// Kept across a restart: the same estimate, the winds less certain by
+    /// the hours they may have drifted, the variation as sure; a snapshot
+    /// of another shape or with values no learner makes is refused.
+    #[test]
+    fn what_was_learnt_survives_a_restart_and_the_wind_ages() {
+        let mut f = WindField::default();
+        assert!(f.snapshot().is_none());
+        for k in 0..300 {
+            let heading = (k * 41 % 360) as f64;
+            let (s, c) = heading.to_radians().sin_cos();
+            let g = Vector2::new(s, c) * 200.0 + Vector2::new(10.0, -5.0);
+            f.learn(k as f64, 8_000.0, &air(heading, 200.0), g, Matrix2::identity() * 0.25, 1.0);
+        }
+        let snap = f.snapshot().unwrap();
+        let mut g = WindField::default();
+        assert!(g.restore(&snap, 300.0));
+        assert_eq!(g.wind_at(8_000.0).0, f.wind_at(8_000.0).0);
+        assert_eq!(g.variation_deg(), f.variation_deg());
+        let mut later = WindField::default();
+        assert!(later.restore(&snap, 300.0 + 4.0 * 3600.0));
+        // At a layer's middle, four hours at 5 m/s an hour: 10 m/s more, in quadrature.
+        let (sigma, aged) = (f.wind_at(7_500.0).1[0], later.wind_at(7_500.0).1[0]);
+        assert!((aged - (sigma * sigma + 100.0).sqrt()).abs() < 0.1, "{sigma} {aged}");
+        assert_eq!(later.variation_deg(), f.variation_deg());
+        let mut bad = snap.clone();
+        bad.x.pop();
+        assert!(!WindField::default().restore(&bad, 0.0));
+        let mut bad = snap;
+        bad.p[0] = f64::NAN;
+        assert!(!WindField::default().restore(&bad, 0.0));
     }
 
     /// A report far off what was learnt (a misread register) is counted

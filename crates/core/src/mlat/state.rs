@@ -6,9 +6,11 @@
 //!
 //! JSON, one object: `{"version":1,"saved_unix":..,"receivers":[{"id":..,
 //! "clock":"gps","lat":..,"lon":..,"alt_m":..,"fixes":..,"bias_s":..,
-//! "var_s2":..,"late_rate":..,"late_mean_s":..,"survey":{...}}]}`. A receiver is restored only if its id,
+//! "var_s2":..,"late_rate":..,"late_mean_s":..,"survey":{...}}],"air":{...}}`. A receiver is restored only if its id,
 //! clock kind and declared position (within a metre) are unchanged: a
-//! receiver moved or reconfigured is learnt afresh.
+//! receiver moved or reconfigured is learnt afresh. `air` is what heading
+//! reports taught of the wind and the magnetic variation (see
+//! `core::wind`), absent from files written before it was learnt.
 
 use serde::{Deserialize, Serialize};
 
@@ -22,6 +24,19 @@ pub struct LearntState {
     pub version: u32,
     pub saved_unix: f64,
     pub receivers: Vec<LearntReceiver>,
+    #[serde(default)]
+    pub air: Option<AirSnapshot>,
+}
+
+/// The wind learner's state: its estimate and covariance (row by row), the
+/// regional spread, and when it last learnt (Unix s).
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+pub struct AirSnapshot {
+    pub x: Vec<f64>,
+    pub p: Vec<f64>,
+    pub scatter_var: f64,
+    pub t: f64,
+    pub learnt: u64,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]

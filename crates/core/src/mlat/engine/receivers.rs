@@ -49,7 +49,7 @@ impl Mlat {
                 survey: r.survey.snapshot(),
             })
             .collect();
-        LearntState { version: crate::mlat::state::VERSION, saved_unix, receivers }
+        LearntState { version: crate::mlat::state::VERSION, saved_unix, receivers, air: None }
     }
 
     /// Takes up what a previous run learnt, for each receiver with the same
