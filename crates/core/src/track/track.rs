@@ -126,6 +126,9 @@ pub struct Track {
     lifecycle: Lifecycle,
     /// Time of the newest accepted position (Unix s).
     pub last_position_t: f64,
+    /// Started from a particle cloud ([`Track::start_from`]): its time
+    /// differences count towards its confirmation.
+    started_from_cloud: bool,
     pub restarts: u64,
     /// Keep `I - K H` of each update (for the cross-covariance of track fusion).
     pub keep_gain: bool,
@@ -159,6 +162,7 @@ impl Track {
             spare: None,
             lifecycle: Lifecycle::default(),
             last_position_t: f64::NEG_INFINITY,
+            started_from_cloud: false,
             restarts: 0,
             keep_gain: false,
             gain: None,
@@ -243,13 +247,19 @@ impl Track {
             (Observation::Position { .. }, _) => {
                 self.record_hit(matches!(outcome, Outcome::Applied { .. } | Outcome::Restarted), m.t)
             }
-            // Time differences confirm a track they can update (one started
-            // from a particle cloud): accepted as a position is, or gated.
-            (Observation::Tdoa { .. }, Outcome::Applied { .. } | Outcome::Gated) => self.lifecycle.record(
-                matches!(outcome, Outcome::Applied { .. }),
-                self.cfg.confirm_m,
-                self.cfg.confirm_n,
-            ),
+            // Time differences confirm a track started from a particle
+            // cloud (which has no position to count): accepted as a position
+            // is, or gated. Others wait for positions, whose heights they
+            // publish with them.
+            (Observation::Tdoa { .. }, Outcome::Applied { .. } | Outcome::Gated)
+                if self.started_from_cloud =>
+            {
+                self.lifecycle.record(
+                    matches!(outcome, Outcome::Applied { .. }),
+                    self.cfg.confirm_m,
+                    self.cfg.confirm_n,
+                )
+            }
             _ => {}
         }
         // Older entries go, up to the next copy, once that copy is older
@@ -300,6 +310,7 @@ impl Track {
             spare: None,
             lifecycle: self.lifecycle.stage_only(),
             last_position_t: self.last_position_t,
+            started_from_cloud: self.started_from_cloud,
             restarts: 0,
             keep_gain: false,
             gain: None,

@@ -193,6 +193,7 @@ impl Track {
             noise.covered_now();
         }
         self.history.clear();
+        self.started_from_cloud = true;
     }
 
     /// `x`: the filter's newest combined estimate.
