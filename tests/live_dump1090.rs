@@ -253,7 +253,14 @@ fn sbs_lines_are_laid_out_and_valued_as_dump1090_writes_them() {
         let (o, t) = (ours.get(kind), theirs.get(kind));
         let (Some(o), Some(t)) = (o, t) else { panic!("MSG,{kind}: ours {o:?}, dump1090's {t:?}") };
         let filled = |f: &Vec<String>| (0..f.len()).filter(|&i| !f[i].is_empty()).collect::<Vec<_>>();
-        for f in o {
+        // A track that its fixes confirm before its first ADS-B position is
+        // decoded (a CPR pair takes two messages; on a loaded machine the
+        // fixes can come first) is published before it has a height: no
+        // vertical rate to give yet. Its velocity lines are compared from
+        // its first height on.
+        let from = o.iter().position(|f| kind != "4" || !f[16].is_empty()).unwrap_or(o.len());
+        assert!(from < o.len() && from <= 3, "MSG,{kind}: ours without a vertical rate: {o:?}");
+        for f in &o[from..] {
             assert_eq!(f.len(), 22, "{f:?}");
             assert_eq!(f[..6], t[0][..6], "MSG,{kind}: {f:?} vs {:?}", t[0]);
             assert!(date_time(f), "{f:?}");

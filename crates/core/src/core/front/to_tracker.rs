@@ -138,15 +138,7 @@ impl Front {
                     };
                     out.push(Cmd::Measure { addr, nac_p: None, m, now: arrival });
                 }
-                // A position not decoded yet (its CPR pair not complete, or
-                // not reliable) still says the altitude: a height for the
-                // track, as an altitude reply's is, so that a track the
-                // fixes start and confirm first has one when it is published.
                 Es::AirbornePosition { alt_ft: Some(a), gnss: false, .. } => {
-                    let (h, var) = height_and_var(a);
-                    let t = timing.map_or(arrival, |(t, _)| t);
-                    let m = Measurement { t, source: Source::Adsb, obs: Observation::Height { h, var } };
-                    out.push(Cmd::Measure { addr, nac_p: None, m, now: arrival });
                     out.push(Cmd::AltBaro { addr, alt_ft: a })
                 }
                 _ => {}
