@@ -19,6 +19,18 @@ fn metric(text: &str, name: &str) -> Option<f64> {
     text.lines().find_map(|l| l.strip_prefix(name)?.strip_prefix(' ')?.trim().parse().ok())
 }
 
+/// Scrapes the metrics until `done` says so or `limit` runs out; the last scrape.
+fn scrape_until(addr: std::net::SocketAddr, limit: Duration, done: impl Fn(&str) -> bool) -> String {
+    let t0 = Instant::now();
+    loop {
+        std::thread::sleep(Duration::from_millis(300));
+        let text = scrape(addr);
+        if done(&text) || t0.elapsed() > limit {
+            return text;
+        }
+    }
+}
+
 #[test]
 fn the_daemon_learns_the_air_from_heading_reports() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -61,15 +73,9 @@ fn the_daemon_learns_the_air_from_heading_reports() {
     wait_for_log(&log, "running");
 
     // Two minutes at eight times: 15 s, and the metrics once a second.
-    let t0 = Instant::now();
-    let mut text = String::new();
-    while t0.elapsed() < Duration::from_secs(40) {
-        std::thread::sleep(Duration::from_millis(500));
-        text = scrape(metrics);
-        if metric(&text, "fuse1090_air_lessons_total").is_some_and(|n| n >= 200.0) {
-            break;
-        }
-    }
+    let text = scrape_until(metrics, Duration::from_secs(40), |t| {
+        metric(t, "fuse1090_air_lessons_total").is_some_and(|n| n >= 200.0)
+    });
     signal(&child, "TERM");
     assert!(exit_within(&mut child, Duration::from_secs(10)).is_some());
     let lessons = metric(&text, "fuse1090_air_lessons_total").unwrap_or(0.0);
@@ -102,14 +108,9 @@ fn the_daemon_learns_the_air_from_heading_reports() {
     let log = work.path().join("again.log");
     let mut child = daemon(&cfg_path, &log, None);
     wait_for_log(&log, "learnt state taken up");
-    let t0 = Instant::now();
-    let mut again = String::new();
-    while metric(&again, "fuse1090_air_magnetic_variation_deg").is_none()
-        && t0.elapsed() < Duration::from_secs(10)
-    {
-        std::thread::sleep(Duration::from_millis(300));
-        again = scrape(metrics);
-    }
+    let again = scrape_until(metrics, Duration::from_secs(10), |t| {
+        metric(t, "fuse1090_air_magnetic_variation_deg").is_some()
+    });
     signal(&child, "TERM");
     assert!(exit_within(&mut child, Duration::from_secs(10)).is_some());
     let restored = metric(&again, "fuse1090_air_magnetic_variation_deg");
