@@ -45,6 +45,7 @@ pub mod mlat;
 pub mod modes;
 pub mod problem;
 pub mod publish;
+pub mod recent;
 pub mod track;
 
 /// The hash map of the per-frame and per-measurement paths: foldhash, seeded

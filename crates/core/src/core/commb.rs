@@ -81,8 +81,8 @@ pub fn air_vector(r: &Bds60, ctx: &ReplyContext) -> Option<(AirVector, f64)> {
     let (tas, step) = match (r.ias_kt, r.mach) {
         (Some(ias), _) if ias > 0 => {
             let tas = air::mach_of_cas(ias as f64, alt_ft) * sound;
-            // One knot of IAS is about TAS/IAS knots of TAS.
-            (tas, KT_TO_MS * tas / (ias as f64 * KT_TO_MS))
+            // One knot of IAS is about TAS/IAS knots of TAS: in m/s, tas / ias.
+            (tas, tas / ias as f64)
         }
         (_, Some(mach)) if mach > 0.0 => (mach * sound, MACH_STEP * sound),
         _ => return None,
@@ -114,10 +114,10 @@ pub fn heading_velocity(
 ) -> Option<Measurement> {
     let (air, alt_m) = air_vector(r, ctx)?;
     let p = wind.predict(alt_m, &air);
-    let cov = p.persistent * ctx.heading_reports.max(1.0) + p.independent;
     if p.persistent.trace() > 2.0 * MAX_USEFUL_SIGMA_MS.powi(2) {
         return None;
     }
+    let cov = p.persistent * ctx.heading_reports.max(1.0) + p.independent;
     Some(Measurement {
         t: arrival - REFRESH_S / 2.0,
         source: Source::Mlat,

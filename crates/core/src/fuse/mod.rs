@@ -46,6 +46,7 @@ use std::sync::Arc;
 use nalgebra::{Matrix2, Vector2};
 
 use crate::mlat::engine::TdoaGroup;
+use crate::recent::RecentCount;
 use crate::track::imm::ImmSpec;
 use crate::track::motion::{Fix2, Motion, MotionTest};
 use crate::track::particle::SparseTrack;
@@ -69,6 +70,16 @@ pub const MIN_CONFLICT_SPEED_MPS: f64 = 30.0;
 /// a white acceleration of 1 m/s^2), so the span over which an error they
 /// share (a receiver's learnt offset) adds up in its estimate.
 const TDOA_SPAN_S: f64 = 30.0;
+
+/// An aircraft's tracks as they start: the fused one and the single-source
+/// ones (which keep each update's gain for the information method), on the
+/// MLAT-only models until its ADS-B is heard.
+fn fresh_tracks(tcfg: &Arc<TrackConfig>, spec: &Arc<ImmSpec>, method: Method) -> (Track, [Track; 2]) {
+    let fused = Track::new(tcfg.clone(), spec.clone());
+    let mut single = fused.clone();
+    single.keep_gain = method == Method::Information;
+    (fused, [single.clone(), single])
+}
 
 /// Speed no aircraft reaches (m/s).
 pub const MAX_SPEED_MPS: f64 = 1_200.0;
@@ -116,9 +127,8 @@ struct Aircraft {
     /// differences keep missing them.
     sparse_geometry: bool,
     sparse_gated: u32,
-    /// Its transmissions taken as time differences, decayed over
-    /// [`TDOA_SPAN_S`], and the newest one's time.
-    tdoa_recent: (f64, f64),
+    /// Its transmissions taken as time differences, faded over [`TDOA_SPAN_S`].
+    tdoa_recent: RecentCount,
     motion: MotionTest,
     motion_plane: Option<Plane>,
     motion_state: Motion,
@@ -321,16 +331,14 @@ impl Fuser {
                 self.next_id += self.id_step;
                 self.next_id - self.id_step
             });
-            let track = Track::new(self.tcfg.clone(), self.spec_mlat_only.clone());
-            let mut single = track.clone();
-            single.keep_gain = self.cfg.method == Method::Information;
+            let (fused, single) = fresh_tracks(&self.tcfg, &self.spec_mlat_only, self.cfg.method);
             self.stats.tracks_created += 1;
             self.aircraft.insert(
                 addr,
                 Box::new(Aircraft {
                     id,
-                    fused: track.clone(),
-                    single: [single.clone(), single],
+                    fused,
+                    single,
                     last_source_t: [f64::NEG_INFINITY; 2],
                     last_heard: now,
                     next_due: f64::NEG_INFINITY,
@@ -349,7 +357,7 @@ impl Fuser {
                     sparse_publishable: 0,
                     sparse_geometry: false,
                     sparse_gated: 0,
-                    tdoa_recent: (0.0, f64::NEG_INFINITY),
+                    tdoa_recent: RecentCount::default(),
                     motion: self.motion.clone(),
                     motion_plane: None,
                     motion_state: Motion::Unknown,
@@ -457,10 +465,13 @@ impl Fuser {
             return;
         }
         let Some(a) = self.aircraft.get_mut(&g.addr) else { return };
-        let (count, then) = a.tdoa_recent;
-        let recent = count * (-(g.t - then).abs() / TDOA_SPAN_S).exp() + 1.0;
-        a.tdoa_recent = (recent, g.t);
-        let g = &TdoaGroup { sites: g.sites_for(recent, TDOA_SPAN_S), ..g.clone() };
+        let recent = a.tdoa_recent.add(g.t, TDOA_SPAN_S);
+        let g = &TdoaGroup {
+            addr: g.addr,
+            t: g.t,
+            sites: g.sites_for(recent, TDOA_SPAN_S),
+            persistent: g.persistent.clone(),
+        };
         if !a.fused.has_position() {
             return self.sparse_tdoa(g, now, out);
         }

@@ -15,7 +15,7 @@ use crate::mlat::engine::TdoaGroup;
 use crate::track::measurement::{Measurement, Observation, Outcome, Source};
 use crate::track::motion::Motion;
 use crate::track::particle::{SparseOutcome, SparseTrack};
-use crate::track::{Estimate, Track};
+use crate::track::Estimate;
 
 /// A height older than this does not place the aircraft on its surface (s).
 const HEIGHT_MAX_AGE_S: f64 = 30.0;
@@ -125,13 +125,8 @@ impl Fuser {
             (Observation::Tdoa { .. }, Outcome::Gated) => {
                 a.sparse_gated += 1;
                 if a.sparse_gated >= self.tcfg.max_gated_in_a_row {
-                    let spec = self.spec_mlat_only.clone();
-                    let keep_gain = a.single[0].keep_gain;
-                    a.fused = Track::new(self.tcfg.clone(), spec.clone());
-                    for single in &mut a.single {
-                        *single = Track::new(self.tcfg.clone(), spec.clone());
-                        single.keep_gain = keep_gain;
-                    }
+                    (a.fused, a.single) =
+                        super::fresh_tracks(&self.tcfg, &self.spec_mlat_only, self.cfg.method);
                     a.sparse_geometry = false;
                     a.sparse_publishable = 0;
                     a.sparse_gated = 0;

@@ -6,6 +6,7 @@
 //! aircraft table's own lifetime bounds it.
 
 use super::{Inference, Known, KnownVelocity, Register};
+use crate::recent::RecentCount;
 
 /// Older than this, an altitude or velocity says too little to weigh a reply by.
 const MAX_AGE_S: f64 = 30.0;
@@ -24,9 +25,8 @@ pub struct Memory {
     /// Turn rate (deg/s, from a track and turn report or two ADS-B
     /// velocities) and its time.
     turn: Option<(f64, f64)>,
-    /// Heading reports identified, decayed over [`HEADING_SPAN_S`], and when
-    /// the last came.
-    heading_reports: (f64, f64),
+    /// Heading reports identified, faded over [`HEADING_SPAN_S`].
+    heading_reports: RecentCount,
 }
 
 /// What a Comm-B reply's user needs to know of the aircraft beyond the reply.
@@ -83,9 +83,7 @@ impl Memory {
                 }
             }
             Inference::Identified(Register::HeadingSpeed(_)) => {
-                let (count, then) = self.heading_reports;
-                let decay = (-(t - then).abs() / HEADING_SPAN_S).exp();
-                self.heading_reports = (count * decay + 1.0, t);
+                self.heading_reports.add(t, HEADING_SPAN_S);
             }
             _ => {}
         }
@@ -94,14 +92,13 @@ impl Memory {
     /// What a reply at `t` (carrying `own_alt_ft` when a DF20) comes with.
     pub fn context(&self, t: f64, own_alt_ft: Option<i32>) -> ReplyContext {
         let recent = |then: f64| (t - then).abs() <= MAX_AGE_S;
-        let (count, then) = self.heading_reports;
         ReplyContext {
             known: self.known(t, own_alt_ft),
             adsb_velocity: self.adsb_velocity.and_then(|(track_deg, gs_kt, then)| {
                 recent(then).then(|| KnownVelocity { track_deg, gs_kt, age_s: (t - then).abs() })
             }),
             turn_dps: self.turn.and_then(|(rate, then)| recent(then).then_some(rate)),
-            heading_reports: count * (-(t - then).abs() / HEADING_SPAN_S).exp(),
+            heading_reports: self.heading_reports.at(t, HEADING_SPAN_S),
         }
     }
 
