@@ -151,8 +151,12 @@ const BARO_LOOK_EVERY_S: f64 = 10.0;
 /// How long a banned sync source is remembered (a spoofer that pauses does
 /// not become honest); other aircraft live the core's `aircraft_ttl_s`.
 pub const BANNED_TTL_S: f64 = 86_400.0;
-/// With `self_survey`, a receiver's survey is looked at every this many measurements.
-const SURVEY_CHECK_EVERY: u64 = 200;
+/// A receiver's survey is looked at every this many measurements: until a
+/// misplaced receiver is found, every fix it is in is pulled all one way
+/// (and a track taking those fixes cannot average that away), so it is
+/// looked at soon after its survey can say anything. A look is a 4x4
+/// inversion.
+const SURVEY_CHECK_EVERY: u64 = 25;
 /// Mean clipped normalised innovation (each pair's clipped at
 /// [`super::sync::JUDGE_NIS_CLIP`]) beyond which an aircraft is no longer a sync
 /// source. An honest one averages about 1 plus 8 times the share of its

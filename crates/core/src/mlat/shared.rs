@@ -190,12 +190,12 @@ impl SharedClock {
                 }
                 Applied::Applied
             }
-            SyncNote::Survey { rows, .. } => {
+            SyncNote::Survey { now, rows } => {
                 if rows.iter().any(|r| r.rx as usize >= n) {
                     return Applied::UnknownReceiver;
                 }
                 for r in rows {
-                    self.surveys[r.rx as usize].add(r.u_enu, r.d_m, r.var_m2);
+                    self.surveys[r.rx as usize].add(r.u_enu, r.d_m, r.var_m2, *now);
                 }
                 Applied::Applied
             }
@@ -373,7 +373,7 @@ mod tests {
                 let note = SyncNote::Survey { now: 1000.0 + k as f64, rows: survey_rows(k) };
                 assert_eq!(service.apply(&note), Applied::Applied);
                 for r in survey_rows(k) {
-                    one.add(r.u_enu, r.d_m, r.var_m2);
+                    one.add(r.u_enu, r.d_m, r.var_m2, 1000.0 + k as f64);
                 }
             }
             assert_eq!(service.surveys[2], one, "one survey of all the notes");

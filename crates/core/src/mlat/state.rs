@@ -68,6 +68,12 @@ pub struct SurveySnapshot {
     pub dd: f64,
     pub n: f64,
     pub count: u64,
+    /// When its first and latest measurements were taken (s; absent from
+    /// older state files, whose surveys are then taken as long enough).
+    #[serde(default)]
+    pub since: f64,
+    #[serde(default)]
+    pub last: f64,
 }
 
 impl LearntState {

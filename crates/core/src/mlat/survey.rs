@@ -22,8 +22,10 @@ use super::state::SurveySnapshot;
 /// The fit's memory, in measurements: slow forgetting, so that a receiver
 /// moved (or corrected) is found again.
 const MEMORY: f64 = 5_000.0;
-/// Measurements before an estimate is given.
-const MIN_MEASUREMENTS: f64 = 200.0;
+/// Measurements before an estimate is given: a dozen per unknown. Early
+/// estimates are rough, but their covariance grows with the fit's
+/// residuals, and a receiver is called misplaced only four sigmas out.
+const MIN_MEASUREMENTS: f64 = 50.0;
 
 /// One receiver's position survey: weighted normal equations of
 /// `[east, north, up, offset]`, forgotten slowly.
@@ -36,17 +38,35 @@ pub struct Survey {
     /// Measurements, as forgotten, and in all.
     n: f64,
     count: u64,
+    /// When its first and its latest measurements were taken (s).
+    since: f64,
+    last: f64,
 }
 
 impl Default for Survey {
     fn default() -> Self {
-        Survey { a: Matrix4::zeros(), b: Vector4::zeros(), dd: 0.0, n: 0.0, count: 0 }
+        Survey { a: Matrix4::zeros(), b: Vector4::zeros(), dd: 0.0, n: 0.0, count: 0, since: 0.0, last: 0.0 }
     }
 }
 
-/// A surveyed offset beyond this (m, and four of its sigmas) is a
-/// misplaced receiver.
+/// A surveyed offset beyond this (m, and [`MISPLACED_SIGMAS`] of its
+/// sigmas) is a misplaced receiver.
 pub const MISPLACED_M: f64 = 30.0;
+const MISPLACED_SIGMAS: f64 = 4.0;
+/// Until its measurements span this long (s), a survey's offset must be
+/// [`MISPLACED_SIGMAS_EARLY`] sigmas out. Its first seconds' measurements
+/// are alike (the same few aircraft, clock pairs still settling), which
+/// its sigma, taking them as independent, does not know: an honest
+/// counter's survey stood 5.5 of its sigmas out over its first ten seconds
+/// on a busy network, fading as the traffic changed. A misplaced receiver
+/// found sooner pulls fewer fixes.
+const SETTLED_S: f64 = 30.0;
+const MISPLACED_SIGMAS_EARLY: f64 = 6.5;
+/// A survey less sure than this (m, 1 sigma) judges nothing: its traffic
+/// came from too few directions (one aircraft's track, say), where the
+/// fit's linearisation and its residual-scaled sigma both fail and a
+/// sigma of kilometres stood four of itself out.
+const JUDGING_SIGMA_M: f64 = 100.0;
 
 /// A position offset found: where the antenna is against where it is
 /// declared (east, north, up m), and the horizontal 1-sigma per axis (m).
@@ -54,6 +74,8 @@ pub const MISPLACED_M: f64 = 30.0;
 pub struct Offset {
     pub enu_m: [f64; 3],
     pub sigma_m: f64,
+    /// Its measurements span [`SETTLED_S`] or more.
+    pub settled: bool,
 }
 
 impl Offset {
@@ -66,7 +88,8 @@ impl Offset {
     /// names it, and `self_survey` moves it.
     pub fn misplaced(&self) -> bool {
         let off = self.horizontal_m();
-        off > MISPLACED_M && off > 4.0 * self.sigma_m
+        let sigmas = if self.settled { MISPLACED_SIGMAS } else { MISPLACED_SIGMAS_EARLY };
+        self.sigma_m <= JUDGING_SIGMA_M && off > MISPLACED_M && off > sigmas * self.sigma_m
     }
 }
 
@@ -74,10 +97,14 @@ impl Survey {
     /// One transmission: the excess range `d_m` (measured less predicted,
     /// m) with its variance, along `u_enu`, the unit vector from the
     /// aircraft to the receiver in the receiver's east-north-up frame.
-    pub fn add(&mut self, u_enu: [f64; 3], d_m: f64, var_m2: f64) {
+    pub fn add(&mut self, u_enu: [f64; 3], d_m: f64, var_m2: f64, now: f64) {
         if !(d_m.is_finite() && var_m2 > 0.0 && var_m2.is_finite()) {
             return;
         }
+        if self.count == 0 {
+            self.since = now;
+        }
+        self.last = now;
         let keep = 1.0 - 1.0 / MEMORY;
         let x = Vector4::new(u_enu[0], u_enu[1], u_enu[2], 1.0);
         let w = 1.0 / var_m2;
@@ -101,18 +128,22 @@ impl Survey {
             dd: self.dd,
             n: self.n,
             count: self.count,
+            since: self.since,
+            last: self.last,
         }
     }
 
     /// A survey as it was saved (`None` if the snapshot is malformed).
     pub fn from_snapshot(s: &SurveySnapshot) -> Option<Survey> {
-        let finite = s.a.iter().chain(&s.b).chain([&s.dd, &s.n]).all(|v| v.is_finite());
+        let finite = s.a.iter().chain(&s.b).chain([&s.dd, &s.n, &s.since, &s.last]).all(|v| v.is_finite());
         (s.a.len() == 16 && s.b.len() == 4 && finite).then(|| Survey {
             a: Matrix4::from_column_slice(&s.a),
             b: Vector4::from_column_slice(&s.b),
             dd: s.dd,
             n: s.n,
             count: s.count,
+            since: s.since,
+            last: s.last,
         })
     }
 
@@ -129,8 +160,11 @@ impl Survey {
         let scale = (chi2 / (self.n - 4.0)).max(1.0);
         let (vee, vnn) = (inv[(0, 0)] * scale, inv[(1, 1)] * scale);
         let sigma_m = ((vee + vnn) / 2.0).sqrt();
-        (sigma_m.is_finite() && x.iter().all(|v| v.is_finite()))
-            .then_some(Offset { enu_m: [x[0], x[1], x[2]], sigma_m })
+        (sigma_m.is_finite() && x.iter().all(|v| v.is_finite())).then_some(Offset {
+            enu_m: [x[0], x[1], x[2]],
+            sigma_m,
+            settled: self.last - self.since >= SETTLED_S,
+        })
     }
 }
 
@@ -157,13 +191,13 @@ mod tests {
         let noise = Normal::new(0.0, 30.0).unwrap();
         let mut s = Survey::default();
         assert_eq!(s.offset(), None);
-        for _ in 0..2_000 {
+        for k in 0..2_000 {
             let az: f64 = rng.gen_range(0.0..std::f64::consts::TAU);
             let el: f64 = rng.gen_range(0.01..0.3);
             // From the aircraft to the receiver: down and away from it.
             let u = [-az.sin() * el.cos(), -az.cos() * el.cos(), -el.sin()];
             let d = u[0] * truth[0] + u[1] * truth[1] + u[2] * truth[2] + 200.0 + noise.sample(&mut rng);
-            s.add(u, d, 30.0 * 30.0);
+            s.add(u, d, 30.0 * 30.0, k as f64 * 0.1);
         }
         let o = s.offset().unwrap();
         let err = (o.enu_m[0] - truth[0]).hypot(o.enu_m[1] - truth[1]);
@@ -171,23 +205,53 @@ mod tests {
         assert!(o.sigma_m < 3.0 && o.sigma_m > 0.5, "{o:?}");
         // Told a third of the real noise, the fit's residuals correct it.
         let mut told_less = Survey::default();
-        for _ in 0..2_000 {
+        for k in 0..2_000 {
             let az: f64 = rng.gen_range(0.0..std::f64::consts::TAU);
             let u = [-az.sin(), -az.cos(), -0.1];
-            told_less.add(u, u[0] * truth[0] + u[1] * truth[1] + noise.sample(&mut rng), 10.0 * 10.0);
+            let d = u[0] * truth[0] + u[1] * truth[1] + noise.sample(&mut rng);
+            told_less.add(u, d, 10.0 * 10.0, k as f64 * 0.1);
         }
         let o2 = told_less.offset().unwrap();
         assert!(o2.sigma_m > 0.9 * o.sigma_m, "{o2:?} against {o:?}");
+    }
+
+    /// The same evidence, four to six sigmas out: not enough over a survey's
+    /// first seconds, enough once its measurements span long enough; and a
+    /// receiver far out is called misplaced at once.
+    #[test]
+    fn an_early_survey_needs_more_evidence() {
+        let survey = |truth: [f64; 2], span_s: f64| {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+            let noise = Normal::new(0.0, 120.0).unwrap();
+            let mut s = Survey::default();
+            for k in 0..400 {
+                let az: f64 = rng.gen_range(0.0..std::f64::consts::TAU);
+                let el: f64 = rng.gen_range(0.05..0.3);
+                let u = [-az.sin() * el.cos(), -az.cos() * el.cos(), -el.sin()];
+                let d = u[0] * truth[0] + u[1] * truth[1] + noise.sample(&mut rng);
+                s.add(u, d, 120.0 * 120.0, k as f64 * span_s / 399.0);
+            }
+            s.offset().unwrap()
+        };
+        let early = survey([50.0, 0.0], 10.0);
+        let z = early.horizontal_m() / early.sigma_m;
+        assert!(!early.settled && (4.0..MISPLACED_SIGMAS_EARLY).contains(&z), "{early:?}");
+        assert!(!early.misplaced());
+        let settled = survey([50.0, 0.0], 60.0);
+        assert!(settled.settled && settled.misplaced(), "{settled:?}");
+        assert!(survey([150.0, 0.0], 10.0).misplaced());
     }
 
     #[test]
     fn traffic_from_one_direction_only_gives_no_offset() {
         let mut s = Survey::default();
         for k in 0..1_000 {
-            s.add([0.0, -1.0, 0.0], 10.0 + (k % 7) as f64, 100.0);
+            s.add([0.0, -1.0, 0.0], 10.0 + (k % 7) as f64, 100.0, k as f64);
         }
         // East and up are not observable: no (finite) answer is claimed.
         assert!(s.offset().is_none_or(|o| o.sigma_m > 1e3), "{:?}", s.offset());
+        // Nor is the receiver called misplaced on it.
+        assert!(s.offset().is_none_or(|o| !o.misplaced()), "{:?}", s.offset());
     }
 
     #[test]

@@ -101,7 +101,7 @@ impl Mlat {
                 rows.push(SurveyRow { rx: rx as u32, u_enu, d_m, var_m2: var });
                 continue;
             }
-            self.rxs[rx].survey.add(u_enu, d_m, var);
+            self.rxs[rx].survey.add(u_enu, d_m, var, now);
             if self.rxs[rx].survey.count() % SURVEY_CHECK_EVERY == 0 {
                 self.place(rx, now);
             }
