@@ -24,7 +24,8 @@ use super::state::SurveySnapshot;
 const MEMORY: f64 = 5_000.0;
 /// Measurements before an estimate is given: a dozen per unknown. Early
 /// estimates are rough, but their covariance grows with the fit's
-/// residuals, and a receiver is called misplaced only four sigmas out.
+/// residuals, and an early one must stand further out of it
+/// ([`MISPLACED_SIGMAS_EARLY`]) to call the receiver misplaced.
 const MIN_MEASUREMENTS: f64 = 50.0;
 
 /// One receiver's position survey: weighted normal equations of
@@ -57,9 +58,9 @@ const MISPLACED_SIGMAS: f64 = 4.0;
 /// [`MISPLACED_SIGMAS_EARLY`] sigmas out. Its first seconds' measurements
 /// are alike (the same few aircraft, clock pairs still settling), which
 /// its sigma, taking them as independent, does not know: an honest
-/// counter's survey stood 5.5 of its sigmas out over its first ten seconds
-/// on a busy network, fading as the traffic changed. A misplaced receiver
-/// found sooner pulls fewer fixes.
+/// counter's survey can stand over five of its sigmas out for its first
+/// seconds on a busy network, fading as the traffic changes. A misplaced
+/// receiver found sooner pulls fewer fixes.
 const SETTLED_S: f64 = 30.0;
 const MISPLACED_SIGMAS_EARLY: f64 = 6.5;
 /// A survey less sure than this (m, 1 sigma) judges nothing: its traffic
