@@ -120,11 +120,11 @@ fn bench(c: &mut Criterion) {
     g.throughput(Throughput::Elements(100));
     g.bench_function("update_2000_particles", |b| {
         b.iter_batched(
-            || SparseTrack::start(&pcfg, &toas(0.0), 0.0, 9000.0, 1).expect("placed"),
+            || SparseTrack::start(&pcfg, &toas(0.0), None, 0.0, 9000.0, 1).expect("placed"),
             |mut s| {
                 for k in 1..=100 {
                     let t = k as f64 * 0.5;
-                    black_box(s.update(&pcfg, &toas(t), t, 9000.0));
+                    black_box(s.update(&pcfg, &toas(t), None, t, 9000.0));
                 }
                 s
             },

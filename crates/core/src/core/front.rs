@@ -140,7 +140,13 @@ impl Front {
             receivers: Vec::new(),
             decoder: Decoder::new(dcfg),
             grouper: Grouper::new(cfg.group_wait_s, cfg.max_pending_groups),
-            mlat: Mlat::new(cfg.mlat.clone()),
+            mlat: {
+                let mut m = Mlat::new(cfg.mlat.clone());
+                if cfg.track.sparse.enabled {
+                    m.learn_coverage();
+                }
+                m
+            },
             watched: FastMap::default(),
             conformance: cfg.fuse.conformance.clone(),
             drop_after_s: cfg.track.drop_after_s,

@@ -471,6 +471,7 @@ impl Fuser {
             t: g.t,
             sites: g.sites_for(recent, TDOA_SPAN_S),
             persistent: g.persistent.clone(),
+            unheard: g.unheard.clone(),
         };
         if !a.fused.has_position() {
             return self.sparse_tdoa(g, now, out);

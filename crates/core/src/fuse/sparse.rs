@@ -42,14 +42,17 @@ impl Fuser {
                 return;
             }
             None => {
-                let Some(s) = SparseTrack::start(cfg, &g.sites, g.t, h, g.addr as u64) else { return };
+                let Some(s) = SparseTrack::start(cfg, &g.sites, g.unheard.as_ref(), g.t, h, g.addr as u64)
+                else {
+                    return;
+                };
                 stats.started += 1;
                 self.sparse_active += 1;
                 a.sparse.insert(Box::new(s))
             }
             Some(s) => {
                 let resamples = s.resamples;
-                match s.update(cfg, &g.sites, g.t, h) {
+                match s.update(cfg, &g.sites, g.unheard.as_ref(), g.t, h) {
                     SparseOutcome::Updated => stats.updates += 1,
                     SparseOutcome::Restarted => {
                         stats.restarts += 1;

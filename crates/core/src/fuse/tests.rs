@@ -345,6 +345,7 @@ fn tdoa_from(addr: u32, t: f64, (lat, lon, h): (f64, f64, f64)) -> crate::mlat::
         t,
         sites: sites.to_vec(),
         persistent: vec![(0.0, 0.0); sites.len()],
+        unheard: None,
     }
 }
 

@@ -27,6 +27,7 @@ use crate::feed::capture::{ClockKind, ReceiverDecl};
 use crate::geo::{ecef_distance, geodetic_to_ecef, FT_TO_M};
 
 use super::baro::{BaroCorrection, GeometricBaros};
+use super::coverage::{Coverage, Unheard};
 
 mod altitude;
 mod config;
@@ -245,6 +246,9 @@ pub struct Mlat {
     /// In a cluster: what this engine did to the clocks, for the clock
     /// service to do once (`None` on a single node, which syncs itself).
     shared: Option<Vec<SyncNote>>,
+    /// Where each receiver hears, for the silence of those that did not
+    /// hear a transmission too few heard.
+    coverage: Coverage,
 }
 
 impl Mlat {
@@ -301,6 +305,7 @@ impl Mlat {
             geometric_baro: GeometricBaros::default(),
             stats: MlatStats::default(),
             shared: None,
+            coverage: Coverage::default(),
         }
     }
 
@@ -328,6 +333,7 @@ impl Mlat {
             surveyed_var_s2: 0.0,
         });
         self.sync.add_receiver(d.clock, &d.id);
+        self.coverage.add_receiver(d.lat, d.lon, d.alt);
     }
 
     /// Takes receiver `rx`'s timing as given, from now on, instead of
@@ -357,6 +363,7 @@ impl Mlat {
     /// (altitudes, fixes and attempts are read within seconds).
     pub fn prune(&mut self, now: f64, ttl_s: f64) {
         self.geometric_baro.prune(now);
+        self.coverage.prune(now, ttl_s);
         self.aircraft.retain(|_, a| {
             let newest = [a.alt_ft.map(|x| x.1), a.last_fix.map(|x| x.1), a.last_tried, a.last_adsb]
                 .into_iter()
@@ -365,6 +372,15 @@ impl Mlat {
             let ttl = if a.sync_banned { BANNED_TTL_S.max(ttl_s) } else { ttl_s };
             now - newest <= ttl
         });
+    }
+
+    /// Learns where each receiver hears, for the particle filter's
+    /// weighing by who heard a transmission (learnt only where used).
+    pub fn learn_coverage(&mut self) {
+        self.coverage = Coverage::enabled();
+        for r in &self.rxs {
+            self.coverage.add_receiver(r.declared.0, r.declared.1, r.declared.2);
+        }
     }
 
     /// Receivers known.
@@ -384,6 +400,15 @@ impl Mlat {
     pub fn on_group(&mut self, g: &Group, now: f64) -> GroupOutcome {
         self.stats.groups += 1;
         let info = g.info;
+        let heard = &g.copies;
+        if self.coverage.is_enabled() {
+            for c in heard {
+                self.coverage.note_heard(c.rx, now);
+            }
+            if let (Some(a), false) = (info.adsb_ecef, info.suspect) {
+                self.coverage.observe(info.addr, a, heard.iter().map(|c| c.rx), now);
+            }
+        }
         if !info.decoded || g.copies.len() < 2 {
             self.stats.too_few_receivers += (g.copies.len() < 2) as u64;
             return GroupOutcome::NoFix(NoFix::TooFewReceivers);
@@ -423,7 +448,8 @@ impl Mlat {
         // receivers synchronised yet).
         let ambiguous = !too_few && g.ms.len() + alt.is_some() as usize == 4 && guess.is_none();
         if too_few || ambiguous {
-            return self.short_of_fix(&info, &g, &arrivals, too_few, now);
+            let heard = heard.iter().map(|c| c.rx).collect();
+            return self.short_of_fix(&info, &g, &arrivals, heard, too_few, now);
         }
         let solved = self.solve_robust(&mut g, alt, guess);
         let (fix, judged) = match solved {
@@ -451,6 +477,11 @@ impl Mlat {
             self.learn(j, &fix, &g.sites, &g.sync_vars, &g.dropped, now);
         }
         self.remember_fix(info.addr, &fix, judged.as_ref().map(|j| &j.at), (alt, baro), now);
+        if fix.dof >= 1 {
+            // Where no aircraft reports its position, the fixes with
+            // redundancy (not one of two solutions) teach the coverage.
+            self.coverage.observe(info.addr, fix.ecef, heard.iter().map(|c| c.rx), now);
+        }
         self.stats.fixes += 1;
         let t = self.emission_time(copies[root].rx, &fix, &arrivals, &g.ms);
         let self_sync_share = if sync_var > 0.0 { self_var / sync_var } else { 0.0 };
@@ -503,6 +534,7 @@ impl Mlat {
         info: &GroupInfo,
         g: &robust::GroupCopies,
         arrivals: &[f64],
+        heard: smallvec::SmallVec<[usize; 8]>,
         too_few: bool,
         now: f64,
     ) -> GroupOutcome {
@@ -525,6 +557,8 @@ impl Mlat {
                 persistent: (g.sites.iter())
                     .map(|site| self.rxs[site[0]].offset_error(now).unwrap_or((0.0, 0.0)))
                     .collect(),
+                unheard: (self.coverage.is_enabled())
+                    .then(|| Unheard { coverage: self.coverage.snapshot(now), heard }),
             });
         }
         GroupOutcome::NoFix(why)

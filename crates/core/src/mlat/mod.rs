@@ -8,6 +8,7 @@
 
 pub mod baro;
 pub mod clock;
+pub mod coverage;
 pub mod engine;
 pub mod group;
 mod late;

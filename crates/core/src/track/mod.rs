@@ -10,6 +10,7 @@
 pub mod config;
 pub mod estimate;
 pub mod gate;
+pub mod hearing;
 pub mod imm;
 pub mod kf;
 pub mod lifecycle;

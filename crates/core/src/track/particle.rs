@@ -23,16 +23,20 @@
 //! aircraft can be. When no particle explains a measurement the cloud has
 //! lost the aircraft: it starts again from that measurement and counts it.
 
-use nalgebra::{Matrix2, Matrix4, Matrix6, Vector3, Vector4, Vector6};
+use nalgebra::{Matrix4, Matrix6, Vector4, Vector6};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 
+use super::hearing::Hearing;
 use super::kf::Gaussian;
 use super::plane::Plane;
-use crate::mlat::solver::C_AIR;
+use crate::mlat::coverage::Unheard;
 use crate::problem::{positive, Problem};
+
+mod surface;
+use surface::{pull, Differences};
 
 /// The particle filter's parameters (`[core.track.sparse]`).
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -66,6 +70,11 @@ pub struct SparseConfig {
     /// might be a cloud passing through one mode on its way between two.
     /// 0: only at the aircraft's first fix.
     pub handover_after: u32,
+    /// Who heard a transmission and who did not (the receivers' coverage,
+    /// learnt from ADS-B) weighs the particles in full once in this long
+    /// (s); 0: not at all. One aircraft's successive transmissions are
+    /// heard or missed alike (its transponder's power, its place).
+    pub hearing_memory_s: f64,
 }
 
 impl Default for SparseConfig {
@@ -83,6 +92,7 @@ impl Default for SparseConfig {
             max_filters: 500,
             start_after_s: 10.0,
             handover_after: 3,
+            hearing_memory_s: 10.0,
         }
     }
 }
@@ -105,6 +115,12 @@ impl SparseConfig {
                 format!("speed_ms = {:?} must be an increasing pair from 0", self.speed_ms),
             ));
         }
+        if !(self.hearing_memory_s.is_finite() && self.hearing_memory_s >= 0.0) {
+            out.push(Problem::at(
+                path,
+                format!("hearing_memory_s = {} must be 0 (off) or more", self.hearing_memory_s),
+            ));
+        }
         positive(
             path,
             &[
@@ -121,83 +137,6 @@ impl SparseConfig {
 /// One transmission's sites: ECEF position (m), time of arrival in the common
 /// clock (s), timing sigma (s); 2 or 3 of them.
 pub type Sites<'a> = &'a [([f64; 3], f64, f64)];
-
-/// The time differences in metres, and their covariance's inverse, for sites
-/// taken relative to the first; and how far each site can see an aircraft
-/// at the height given (its radio horizon).
-struct Differences {
-    n: usize,
-    rx: [Vector3<f64>; 3],
-    z: [f64; 2],
-    info: Matrix2<f64>,
-    /// Cholesky factor of the differences' covariance (m), for drawing their noise.
-    chol: Matrix2<f64>,
-    horizon_m: [f64; 3],
-}
-
-/// Radio horizon (m) between antennas at heights `a` and `b` (m) over a
-/// smooth Earth, with the usual 4/3 radius for refraction.
-fn horizon_m(a: f64, b: f64) -> f64 {
-    const K: f64 = 4_122.0;
-    K * (a.max(0.0).sqrt() + b.max(0.0).sqrt())
-}
-
-impl Differences {
-    fn new(plane: &Plane, sites: Sites, h: f64) -> Option<Differences> {
-        let n = sites.len();
-        if !(2..=3).contains(&n) {
-            return None;
-        }
-        let s = |i: usize| sites[i.min(n - 1)];
-        let var = |i: usize| (s(i).2 * C_AIR).powi(2);
-        // Differences against one site share its error.
-        let cov = Matrix2::new(var(1) + var(0), var(0), var(0), var(2) + var(0));
-        let (info, chol) = if n == 2 {
-            (Matrix2::new(1.0 / cov[(0, 0)], 0.0, 0.0, 0.0), Matrix2::new(cov[(0, 0)].sqrt(), 0.0, 0.0, 0.0))
-        } else {
-            (cov.try_inverse()?, cov.cholesky()?.l())
-        };
-        Some(Differences {
-            n,
-            rx: std::array::from_fn(|i| plane.ecef_to_local(s(i).0)),
-            z: std::array::from_fn(|i| (s(i + 1).1 - s(0).1) * C_AIR),
-            info,
-            chol,
-            horizon_m: std::array::from_fn(|i| horizon_m(crate::geo::ecef_to_geodetic(s(i).0).2, h)),
-        })
-    }
-
-    /// Whether every site can see plane position (e, n) at height `h`.
-    fn visible(&self, plane: &Plane, e: f64, n: f64, h: f64) -> bool {
-        let p = Vector3::new(e, n, plane.up_at(e, n, h));
-        (0..self.n).all(|i| (p - self.rx[i]).norm() <= self.horizon_m[i])
-    }
-
-    /// Residuals (m) at plane position (e, n) and height `h`.
-    fn residual(&self, plane: &Plane, e: f64, n: f64, h: f64) -> [f64; 2] {
-        let p = Vector3::new(e, n, plane.up_at(e, n, h));
-        let r0 = (p - self.rx[0]).norm();
-        std::array::from_fn(
-            |i| if i + 1 < self.n { (p - self.rx[i + 1]).norm() - r0 - self.z[i] } else { 0.0 },
-        )
-    }
-
-    /// A draw of the differences' noise (m).
-    fn noise(&self, rng: &mut ChaCha8Rng) -> [f64; 2] {
-        let z = nalgebra::Vector2::new(
-            rng.sample::<f64, _>(StandardNormal),
-            rng.sample::<f64, _>(StandardNormal),
-        );
-        let v = self.chol * z;
-        [v[0], v[1]]
-    }
-
-    /// Chi-square of the residuals (1 or 2 degrees of freedom).
-    fn chi2(&self, r: [f64; 2]) -> f64 {
-        let v = nalgebra::Vector2::new(r[0], r[1]);
-        (v.transpose() * self.info * v)[0]
-    }
-}
 
 /// What became of one measurement.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -220,10 +159,25 @@ pub struct SparseTrack {
     rng: ChaCha8Rng,
     pub restarts: u32,
     pub resamples: u32,
+    /// The newest transmission: its sites, the height, and who heard it.
+    last: Option<Last>,
 }
 
-/// Gauss-Newton steps pulling a drawn point onto a measurement's surface.
-const PULL_STEPS: usize = 12;
+#[derive(Clone, Debug)]
+struct Last {
+    sites: Vec<([f64; 3], f64, f64)>,
+    h: f64,
+    unheard: Option<Unheard>,
+}
+
+/// A mirror solution of the newest transmission counts as ruled out only
+/// where who heard it makes it this much less likely than the cloud's mean
+/// (chi-square units: a likelihood ratio of 20). The time differences
+/// alone cannot choose between mirrors, and a cloud left to itself loses
+/// one of two equal modes by chance: published, it would be one mode's
+/// estimate with the confidence of both.
+const MIRROR_EVIDENCE: f64 = 6.0;
+
 /// How far copies of too few placed particles are moved before being pulled back (m).
 const FILL_JITTER_M: f64 = 2_000.0;
 /// A measurement no particle explains better than this (chi-square) restarts the cloud.
@@ -232,7 +186,14 @@ const LOST_CHI2: f64 = 100.0;
 impl SparseTrack {
     /// A cloud on the surface of the first measurement (`None` when the sites
     /// are unusable or no drawn point reaches the surface).
-    pub fn start(cfg: &SparseConfig, sites: Sites, t: f64, h: f64, seed: u64) -> Option<SparseTrack> {
+    pub fn start(
+        cfg: &SparseConfig,
+        sites: Sites,
+        unheard: Option<&Unheard>,
+        t: f64,
+        h: f64,
+        seed: u64,
+    ) -> Option<SparseTrack> {
         let centre = sites.iter().fold([0.0; 3], |a, s| [a[0] + s.0[0], a[1] + s.0[1], a[2] + s.0[2]]);
         let k = sites.len().max(1) as f64;
         let (lat, lon, _) = crate::geo::ecef_to_geodetic(centre.map(|c| c / k));
@@ -244,13 +205,16 @@ impl SparseTrack {
             rng: <ChaCha8Rng as rand::SeedableRng>::seed_from_u64(seed),
             restarts: 0,
             resamples: 0,
+            last: None,
         };
-        s.place(cfg, sites, h).then_some(s)
+        s.place(cfg, sites, unheard, h).then_some(s)
     }
 
-    /// Draws the particles onto the measurement's surface; false if none got there.
-    fn place(&mut self, cfg: &SparseConfig, sites: Sites, h: f64) -> bool {
+    /// Draws the particles onto the measurement's surface, weighed by who
+    /// heard it and who did not; false if none got there.
+    fn place(&mut self, cfg: &SparseConfig, sites: Sites, unheard: Option<&Unheard>, h: f64) -> bool {
         let Some(d) = Differences::new(&self.plane, sites, h) else { return false };
+        self.last = Some(Last { sites: sites.to_vec(), h, unheard: unheard.cloned() });
         let mut x = Vec::with_capacity(cfg.particles);
         let mut tries = 0;
         while x.len() < cfg.particles && tries < cfg.particles * 4 {
@@ -281,15 +245,52 @@ impl SparseTrack {
             }
             x.push(c);
         }
-        self.w = vec![1.0 / x.len() as f64; x.len()];
         self.x = x;
+        let hearing = self.hearing(unheard, h).filter(|_| cfg.hearing_memory_s > 0.0);
+        let cost: Vec<f64> =
+            self.x.iter().map(|x| hearing.as_ref().map_or(0.0, |s| s.cost(x[0], x[1]))).collect();
+        self.w = vec![1.0; self.x.len()];
+        self.reweigh(&cost);
         true
+    }
+
+    /// Who heard the transmission, and the silent receivers that could have
+    /// heard a part of the cloud, for an aircraft at height `h`.
+    fn hearing<'a>(&self, unheard: Option<&'a Unheard>, h: f64) -> Option<Hearing<'a>> {
+        let unheard = unheard?;
+        let (mut min, mut max) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for x in &self.x {
+            for k in 0..2 {
+                min[k] = min[k].min(x[k]);
+                max[k] = max[k].max(x[k]);
+            }
+        }
+        Some(Hearing::new(&self.plane, unheard, self.t, h, min, max))
+    }
+
+    /// Multiplies the weights by the likelihood of costs `cost` (chi-square
+    /// units, taken relative to the least: no underflow), and normalises.
+    fn reweigh(&mut self, cost: &[f64]) {
+        let best = cost.iter().cloned().fold(f64::INFINITY, f64::min);
+        for (w, c) in self.w.iter_mut().zip(cost) {
+            *w *= (-0.5 * (c - best)).exp();
+        }
+        let sum: f64 = self.w.iter().sum();
+        self.w.iter_mut().for_each(|w| *w /= sum);
     }
 
     /// Moves the cloud to `t` and weighs it by one transmission's time
     /// differences, at the aircraft's height `h` (m).
-    pub fn update(&mut self, cfg: &SparseConfig, sites: Sites, t: f64, h: f64) -> SparseOutcome {
+    pub fn update(
+        &mut self,
+        cfg: &SparseConfig,
+        sites: Sites,
+        unheard: Option<&Unheard>,
+        t: f64,
+        h: f64,
+    ) -> SparseOutcome {
         let Some(d) = Differences::new(&self.plane, sites, h) else { return SparseOutcome::Unusable };
+        self.last = Some(Last { sites: sites.to_vec(), h, unheard: unheard.cloned() });
         let dt = (t - self.t).max(0.0);
         self.t = self.t.max(t);
         let q = cfg.accel_ms2;
@@ -318,18 +319,22 @@ impl SparseTrack {
         // NaN included: no particle explained it.
         if best.is_nan() || best > LOST_CHI2 {
             self.restarts += 1;
-            return if self.place(cfg, sites, h) {
+            return if self.place(cfg, sites, unheard, h) {
                 SparseOutcome::Restarted
             } else {
                 SparseOutcome::Unusable
             };
         }
-        // Relative to the best particle: no underflow.
-        for (w, c) in self.w.iter_mut().zip(&chi) {
-            *w *= (-0.5 * (c - best)).exp();
-        }
-        let sum: f64 = self.w.iter().sum();
-        self.w.iter_mut().for_each(|w| *w /= sum);
+        // Who heard it weighs too, but only the time differences say
+        // whether the cloud still holds the aircraft (above).
+        let share = if cfg.hearing_memory_s > 0.0 { (dt / cfg.hearing_memory_s).min(1.0) } else { 0.0 };
+        let cost = match self.hearing(unheard, h).filter(|_| share > 0.0) {
+            Some(hearing) => {
+                self.x.iter().zip(&chi).map(|(x, c)| c + share * hearing.cost(x[0], x[1])).collect()
+            }
+            None => chi,
+        };
+        self.reweigh(&cost);
         let ess = 1.0 / self.w.iter().map(|w| w * w).sum::<f64>();
         if ess < cfg.resample_below * self.x.len() as f64 {
             self.resample(&d, h);
@@ -377,6 +382,11 @@ impl SparseTrack {
         }
         self.x = out;
         self.w = vec![1.0 / n as f64; n];
+    }
+
+    /// The particles' states [e, n, ve, vn] in the cloud's plane, and their weights.
+    pub fn particles(&self) -> impl Iterator<Item = (&Vector4<f64>, f64)> {
+        self.x.iter().zip(self.w.iter().copied())
     }
 
     /// Weighted mean and covariance of the state.
@@ -437,7 +447,27 @@ impl SparseTrack {
         let (m, cov) = self.moments();
         let sigma =
             cov.fixed_view::<2, 2>(0, 0).into_owned().symmetric_eigen().eigenvalues.max().max(0.0).sqrt();
-        (sigma <= max_sigma_m && self.one_mode(&m, &cov)).then(|| (self.plane, as_gaussian(&m, &cov)))
+        (sigma <= max_sigma_m && self.one_mode(&m, &cov) && !self.mirror_open(&m, &cov))
+            .then(|| (self.plane, as_gaussian(&m, &cov)))
+    }
+
+    /// Whether the newest transmission has a solution far outside the
+    /// cloud that who heard it does not rule out (see [`MIRROR_EVIDENCE`]).
+    fn mirror_open(&self, mean: &Vector4<f64>, cov: &Matrix4<f64>) -> bool {
+        let Some(last) = &self.last else { return false };
+        let Some(d) = Differences::new(&self.plane, &last.sites, last.h) else { return false };
+        let Some(info) = cov.fixed_view::<2, 2>(0, 0).into_owned().try_inverse() else { return true };
+        let all = ([f64::NEG_INFINITY; 2], [f64::INFINITY; 2]);
+        let hearing =
+            last.unheard.as_ref().map(|u| Hearing::new(&self.plane, u, self.t, last.h, all.0, all.1));
+        let cost = |e: f64, n: f64| hearing.as_ref().map_or(0.0, |h| h.cost(e, n));
+        let here = cost(mean[0], mean[1]);
+        let open = surface::solutions(&d, &self.plane, last.h).any(|(e, n)| {
+            let x = nalgebra::Vector2::new(e - mean[0], n - mean[1]);
+            let apart = (x.transpose() * info * x)[0] > 25.0 && x.norm() > 1_000.0;
+            apart && cost(e, n) - here < MIRROR_EVIDENCE
+        });
+        open
     }
 }
 
@@ -448,60 +478,11 @@ fn as_gaussian(m: &Vector4<f64>, cov: &Matrix4<f64>) -> Gaussian {
     g
 }
 
-/// A plane point moved by Gauss-Newton steps to where the residuals are
-/// `target` (a draw of the measurement's noise: with two differences the
-/// surface is a point at the height, and every particle pulled exactly onto
-/// it would be the same), if it gets there within the sites' horizons.
-fn pull(
-    d: &Differences,
-    plane: &Plane,
-    mut e: f64,
-    mut n: f64,
-    h: f64,
-    target: [f64; 2],
-) -> Option<(f64, f64)> {
-    for _ in 0..PULL_STEPS {
-        let (res, jac) = residual_jacobian(d, plane, e, n, h);
-        let res = [res[0] - target[0], res[1] - target[1]];
-        let step = if d.n == 2 {
-            let g = jac[0];
-            let gg = g[0] * g[0] + g[1] * g[1];
-            if gg < 1e-12 {
-                return None;
-            }
-            [res[0] * g[0] / gg, res[0] * g[1] / gg]
-        } else {
-            let j = Matrix2::new(jac[0][0], jac[0][1], jac[1][0], jac[1][1]);
-            let s = j.try_inverse()? * nalgebra::Vector2::new(res[0], res[1]);
-            [s[0], s[1]]
-        };
-        e -= step[0];
-        n -= step[1];
-    }
-    (d.visible(plane, e, n, h) && d.chi2(d.residual(plane, e, n, h)) <= 9.0).then_some((e, n))
-}
-
-/// Residuals and their gradients in (e, n) at a plane point.
-fn residual_jacobian(d: &Differences, plane: &Plane, e: f64, n: f64, h: f64) -> ([f64; 2], [[f64; 2]; 2]) {
-    let p = Vector3::new(e, n, plane.up_at(e, n, h));
-    let unit = |i: usize| {
-        let v = p - d.rx[i];
-        let r = v.norm().max(1.0);
-        [v[0] / r, v[1] / r]
-    };
-    let u0 = unit(0);
-    let res = d.residual(plane, e, n, h);
-    let jac = std::array::from_fn(|i| {
-        let u = unit((i + 1).min(d.n - 1));
-        [u[0] - u0[0], u[1] - u0[1]]
-    });
-    (res, jac)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::geo::geodetic_to_ecef;
+    use crate::mlat::solver::C_AIR;
 
     /// Three sites 60 km apart, an aircraft 80 km from them at 10 km flying
     /// east at 200 m/s, a transmission a second: the cloud must find it and
@@ -528,10 +509,10 @@ mod tests {
             })
         };
         let cfg = SparseConfig { enabled: true, ..Default::default() };
-        let mut s = SparseTrack::start(&cfg, &sites_at(0.0, &mut noise), 0.0, h, 1).unwrap();
+        let mut s = SparseTrack::start(&cfg, &sites_at(0.0, &mut noise), None, 0.0, h, 1).unwrap();
         for k in 1..=60 {
             let t = k as f64;
-            assert_ne!(s.update(&cfg, &sites_at(t, &mut noise), t, h), SparseOutcome::Unusable);
+            assert_ne!(s.update(&cfg, &sites_at(t, &mut noise), None, t, h), SparseOutcome::Unusable);
         }
         let (m, cov) = s.moments();
         let (lat, lon) = plane.to_geodetic(-40_000.0 + 200.0 * 60.0, 70_000.0);
@@ -545,7 +526,7 @@ mod tests {
         // A transmission 6 km of range off: no particle explains it.
         let far =
             sites_at(0.0, &mut noise).map(|(r, toa, sg)| (r, toa + if r == rx[0] { 20e-6 } else { 0.0 }, sg));
-        assert_eq!(s.update(&cfg, &far, 61.0, h), SparseOutcome::Restarted);
+        assert_eq!(s.update(&cfg, &far, None, 61.0, h), SparseOutcome::Restarted);
         assert_eq!(s.restarts, 1);
     }
 }

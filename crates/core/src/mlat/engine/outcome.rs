@@ -45,6 +45,9 @@ pub struct TdoaGroup {
     /// how long it lasts (s). The same error in every transmission a track
     /// takes, it cannot be averaged away (see [`TdoaGroup::sites_for`]).
     pub persistent: Vec<(f64, f64)>,
+    /// Who heard it, with every receiver's coverage: the silence of the
+    /// others places it too (`None` where nothing is known of coverage).
+    pub unheard: Option<crate::mlat::coverage::Unheard>,
 }
 
 impl TdoaGroup {
@@ -113,6 +116,7 @@ mod tests {
             t: 0.0,
             sites: vec![([0.0; 3], 0.0, 50e-9), ([1.0; 3], 1e-6, 30e-9)],
             persistent: vec![(64e-18, f64::INFINITY), (0.0, 0.0)],
+            unheard: None,
         };
         let alone = g.sites_for(1.0, 30.0);
         assert!((alone[0].2 - (2500e-18f64 + 64e-18).sqrt()).abs() < 1e-15);
