@@ -319,6 +319,20 @@ impl Coverage {
         }
     }
 
+    /// A transmission's group at server time `now`: its receivers were
+    /// listening, and its ADS-B position (unless suspect) is a sample.
+    pub fn on_group(&mut self, g: &crate::mlat::group::Group, now: f64) {
+        if !self.enabled {
+            return;
+        }
+        for c in &g.copies {
+            self.note_heard(c.rx, now);
+        }
+        if let (Some(a), false) = (g.info.adsb_ecef, g.info.suspect) {
+            self.observe(g.info.addr, a, g.copies.iter().map(|c| c.rx), now);
+        }
+    }
+
     /// A transmission of aircraft `addr` from `ecef` heard by `heard`:
     /// counted for every listening receiver, if the aircraft is due a
     /// sample.

@@ -246,8 +246,8 @@ pub struct Mlat {
     /// In a cluster: what this engine did to the clocks, for the clock
     /// service to do once (`None` on a single node, which syncs itself).
     shared: Option<Vec<SyncNote>>,
-    /// Where each receiver hears, for the silence of those that did not
-    /// hear a transmission too few heard.
+    /// Where each receiver hears: who heard a transmission too few heard,
+    /// and who did not, places it too.
     coverage: Coverage,
 }
 
@@ -401,14 +401,7 @@ impl Mlat {
         self.stats.groups += 1;
         let info = g.info;
         let heard = &g.copies;
-        if self.coverage.is_enabled() {
-            for c in heard {
-                self.coverage.note_heard(c.rx, now);
-            }
-            if let (Some(a), false) = (info.adsb_ecef, info.suspect) {
-                self.coverage.observe(info.addr, a, heard.iter().map(|c| c.rx), now);
-            }
-        }
+        self.coverage.on_group(g, now);
         if !info.decoded || g.copies.len() < 2 {
             self.stats.too_few_receivers += (g.copies.len() < 2) as u64;
             return GroupOutcome::NoFix(NoFix::TooFewReceivers);
