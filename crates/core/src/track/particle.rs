@@ -22,6 +22,10 @@
 //! not the time differences, bounds how far out along a hyperbola the
 //! aircraft can be. When no particle explains a measurement the cloud has
 //! lost the aircraft: it starts again from that measurement and counts it.
+//! Who heard each transmission and who did not weighs the particles too
+//! ([`super::hearing`]), and a cloud is published only once that rules
+//! out the newest transmission's mirror solutions, which the time
+//! differences cannot tell from it.
 
 use nalgebra::{Matrix4, Matrix6, Vector4, Vector6};
 use rand::Rng;
@@ -71,7 +75,7 @@ pub struct SparseConfig {
     /// 0: only at the aircraft's first fix.
     pub handover_after: u32,
     /// Who heard a transmission and who did not (the receivers' coverage,
-    /// learnt from ADS-B) weighs the particles in full once in this long
+    /// learnt from ADS-B and fixes) weighs the particles in full once in this long
     /// (s); 0: not at all. One aircraft's successive transmissions are
     /// heard or missed alike (its transponder's power, its place).
     pub hearing_memory_s: f64,
@@ -441,8 +445,8 @@ impl SparseTrack {
     }
 
     /// [`Self::gaussian`], when the cloud is worth publishing: one-peaked,
-    /// its position within `max_sigma_m` (1 sigma, largest axis). One pass
-    /// over the particles for all three.
+    /// its position within `max_sigma_m` (1 sigma, largest axis), its
+    /// newest transmission's mirror solutions ruled out.
     pub fn publishable(&self, max_sigma_m: f64) -> Option<(Plane, Gaussian)> {
         let (m, cov) = self.moments();
         let sigma =
@@ -462,6 +466,7 @@ impl SparseTrack {
             last.unheard.as_ref().map(|u| Hearing::new(&self.plane, u, self.t, last.h, all.0, all.1));
         let cost = |e: f64, n: f64| hearing.as_ref().map_or(0.0, |h| h.cost(e, n));
         let here = cost(mean[0], mean[1]);
+        // Named: the search borrows `d`, which its value as the tail would outlive.
         let open = surface::solutions(&d, &self.plane, last.h).any(|(e, n)| {
             let x = nalgebra::Vector2::new(e - mean[0], n - mean[1]);
             let apart = (x.transpose() * info * x)[0] > 25.0 && x.norm() > 1_000.0;
