@@ -12,10 +12,9 @@
 //!
 //! Learnt from ADS-B positions and fixes with redundancy (nothing but the
 //! traffic: receivers' ranges differ with antennas, sites and terrain, by
-//! bearing too). Each
-//! aircraft is sampled once every few seconds at most: its successive
-//! transmissions are heard alike, and the sample costs a look at every
-//! receiver. Counts are halved once a cell has seen enough, so that a
+//! bearing too). Each aircraft is sampled once every few seconds at most:
+//! its successive transmissions are heard alike, and the sample costs a
+//! look at every receiver. Counts are halved once a cell has seen enough, so that a
 //! receiver's coverage follows a changed antenna. A receiver is listening
 //! while it has sent anything lately; one that has not is never counted
 //! as silent.
@@ -51,8 +50,8 @@ const CELL_MEMORY: f32 = 200.0;
 /// transmission, pulled clouds onto wrong places; and cells learn slowly.
 const SECTOR_HEARD: f32 = 30.0;
 const REACH_SHARE: f32 = 0.98;
-/// A sector is deaf (reach 0) where a receiver heard less than this share
-/// of what it missed at least this many of.
+/// A sector is deaf (reach 0) once a receiver missed at least
+/// `DEAF_MISSES` there and heard less than `DEAF_SHARE` of what flew there.
 const DEAF_SHARE: f32 = 0.05;
 const DEAF_MISSES: f32 = 20.0;
 /// A miss counts inside the reach (less its last ring, where the reach
@@ -64,9 +63,10 @@ const PRIOR_OFFERED: f32 = 4.0;
 /// inside its coverage happens (garbled replies, a weak transponder), and
 /// one must not rule a place out alone.
 const MAX_DETECT: f32 = 0.9;
-/// A hearing counts from this many rings past the reach (a reach from a few
-/// dozen aircraft falls short of the true one), where the receiver missed
-/// at least this many transmissions (nothing flying there is no evidence)...
+/// A hearing counts only beyond this many rings past the reach (a reach
+/// from a few dozen aircraft falls short of the true one), where the
+/// receiver missed at least `BEYOND_MISSES` transmissions (nothing flying
+/// there is no evidence)...
 const BEYOND_MARGIN: usize = 1;
 const BEYOND_MISSES: f32 = 30.0;
 /// ...as this share heard: an aircraft heard further than its kind usually
