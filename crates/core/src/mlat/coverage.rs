@@ -296,11 +296,12 @@ impl Coverage {
         Coverage { enabled: true, ..Default::default() }
     }
 
-    pub fn is_enabled(&self) -> bool {
-        self.enabled
-    }
-
+    /// A receiver added (nothing kept while the learner is off: the
+    /// engine adds every receiver it knows when it turns it on).
     pub fn add_receiver(&mut self, lat: f64, lon: f64, alt_m: f64) {
+        if !self.enabled {
+            return;
+        }
         self.sites.push(Site {
             ecef: geodetic_to_ecef(lat, lon, alt_m),
             lat_lon: (lat, lon),
@@ -371,6 +372,13 @@ impl Coverage {
                 *got *= 0.5;
             }
         }
+    }
+
+    /// Who heard a transmission (its copies), with the coverage, for the
+    /// tracker (`None` while the learner is off).
+    pub fn unheard(&mut self, heard: &[crate::mlat::group::Copy], now: f64) -> Option<Unheard> {
+        self.enabled
+            .then(|| Unheard { coverage: self.snapshot(now), heard: heard.iter().map(|c| c.rx).collect() })
     }
 
     /// The coverage as the tracker takes it, renewed every few seconds.

@@ -27,7 +27,7 @@ use crate::feed::capture::{ClockKind, ReceiverDecl};
 use crate::geo::{ecef_distance, geodetic_to_ecef, FT_TO_M};
 
 use super::baro::{BaroCorrection, GeometricBaros};
-use super::coverage::{Coverage, Unheard};
+use super::coverage::Coverage;
 
 mod altitude;
 mod config;
@@ -441,7 +441,6 @@ impl Mlat {
         // receivers synchronised yet).
         let ambiguous = !too_few && g.ms.len() + alt.is_some() as usize == 4 && guess.is_none();
         if too_few || ambiguous {
-            let heard = heard.iter().map(|c| c.rx).collect();
             return self.short_of_fix(&info, &g, &arrivals, heard, too_few, now);
         }
         let solved = self.solve_robust(&mut g, alt, guess);
@@ -527,7 +526,7 @@ impl Mlat {
         info: &GroupInfo,
         g: &robust::GroupCopies,
         arrivals: &[f64],
-        heard: smallvec::SmallVec<[usize; 8]>,
+        heard: &[super::group::Copy],
         too_few: bool,
         now: f64,
     ) -> GroupOutcome {
@@ -550,8 +549,7 @@ impl Mlat {
                 persistent: (g.sites.iter())
                     .map(|site| self.rxs[site[0]].offset_error(now).unwrap_or((0.0, 0.0)))
                     .collect(),
-                unheard: (self.coverage.is_enabled())
-                    .then(|| Unheard { coverage: self.coverage.snapshot(now), heard }),
+                unheard: self.coverage.unheard(heard, now),
             });
         }
         GroupOutcome::NoFix(why)
