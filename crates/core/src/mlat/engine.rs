@@ -158,6 +158,15 @@ pub const BANNED_TTL_S: f64 = 86_400.0;
 /// looked at soon after its survey can say anything. A look is a 4x4
 /// inversion.
 const SURVEY_CHECK_EVERY: u64 = 25;
+/// Fastest an aircraft is taken to fly (m/s, above any airliner's ground
+/// speed), and what a fix without redundancy may be off by besides (m).
+const MAX_SPEED_MPS: f64 = 600.0;
+const UNCHECKED_FIX_SLACK_M: f64 = 3_000.0;
+
+/// How far from an earlier fix an aircraft can be `dt` seconds on.
+fn reach_m(dt: f64) -> f64 {
+    MAX_SPEED_MPS * dt.abs() + UNCHECKED_FIX_SLACK_M
+}
 /// Mean clipped normalised innovation (each pair's clipped at
 /// [`super::sync::JUDGE_NIS_CLIP`]) beyond which an aircraft is no longer a sync
 /// source. An honest one averages about 1 plus 8 times the share of its
@@ -417,7 +426,7 @@ impl Mlat {
             Ok(ac) => ac,
             Err(why) => return GroupOutcome::NoFix(why),
         };
-        let (times, root) = self.sync.common_time(&copies, now);
+        let (times, root, anchor_copies) = self.sync.common_time_anchored(&copies, now);
         if let (Some(a), false) = (info.adsb_ecef, info.suspect) {
             match &all_copies {
                 None => self.survey_from(&copies, &times, a, info.adsb_sigma_m, now),
@@ -429,7 +438,8 @@ impl Mlat {
         }
         let Measured { mut g, sync_var, self_var, all_var } = self.measurements(&copies, &times, info.addr);
         let (baro, alt) = self.altitude_constraint(&ac, now);
-        let guess = ac.last_fix.filter(|(_, t)| (now - t).abs() < 30.0).map(|(p, _)| p);
+        let last_fix = ac.last_fix.filter(|(_, t)| (now - t).abs() < 30.0);
+        let guess = last_fix.map(|(p, _)| p);
         let too_few = g.ms.len() < 3 || (g.ms.len() < 4 && alt.is_none());
         // Exactly as many measurements as unknowns: the equations have two
         // solutions (hyperboloids and the altitude's shell meet twice), both
@@ -451,6 +461,13 @@ impl Mlat {
                 return GroupOutcome::NoFix(NoFix::Rejected(why));
             }
         };
+        // Started from the earlier fix, a group with one degree of freedom
+        // or none can still land on its other solution, where the noise
+        // leaves none near the aircraft: one further than it could have
+        // flown is that, and the group is ambiguous.
+        if fix.dof <= 1 && last_fix.is_some_and(|(p, t)| ecef_distance(p, fix.ecef) > reach_m(now - t)) {
+            return self.short_of_fix(&info, &g, &arrivals, heard, false, now);
+        }
         // Hedged against late copies, judged at the fix (as the robust
         // solve already did when its last round found no outlier).
         let judged =
@@ -466,7 +483,9 @@ impl Mlat {
             return GroupOutcome::NoFix(NoFix::UnverifiedAddress);
         }
         if let Some(j) = judged.as_ref().filter(|_| self.cfg.calibrate && fix.dof >= 1) {
-            self.learn(j, &fix, &g.sites, &g.sync_vars, &g.dropped, now);
+            let anchors: GroupVec<(usize, Option<usize>)> =
+                (copies.iter().zip(&anchor_copies)).map(|(c, a)| (c.rx, a.map(|a| copies[a].rx))).collect();
+            self.learn(j, &fix, &g.sites, &g.sync_vars, &g.dropped, &anchors, now);
         }
         self.remember_fix(info.addr, &fix, judged.as_ref().map(|j| &j.at), (alt, baro), now);
         if fix.dof >= 1 {

@@ -99,8 +99,8 @@ pub enum Reject {
     Range,
     Height,
     Gdop,
-    /// Exactly determined (no redundancy) with no earlier fix with
-    /// redundancy to choose between its two solutions.
+    /// Two solutions fit (exactly determined, or two far apart with
+    /// little redundancy) and no earlier fix with redundancy chooses.
     Ambiguous,
 }
 
@@ -237,6 +237,12 @@ pub fn chi2_quantile(dof: usize, q: f64) -> f64 {
     k * (1.0 - h + z * h.sqrt()).powi(3)
 }
 
+/// Two solutions further apart than this (m) are two, not one found twice.
+const MIRROR_APART_M: f64 = 1_000.0;
+/// Starts above the first receivers, for a group with little redundancy
+/// and no earlier fix.
+const EXPLORE_STARTS: usize = 4;
+
 /// Solves for the emitter. `guess` (ECEF) is tried first when given.
 // Over 80 lines, kept whole: start, Levenberg-Marquardt iterations and
 // covariance share the stack matrices of one solve on the per-fix path.
@@ -252,7 +258,7 @@ pub fn solve(
     }
     // Work relative to the earliest arrival so pseudoranges stay small.
     let t0 = ms.iter().map(|m| m.t).fold(f64::INFINITY, f64::min);
-    let mut starts: [Option<Vector4<f64>>; 4] = [None; 4];
+    let mut starts: [Option<Vector4<f64>>; 4 + EXPLORE_STARTS] = [None; 4 + EXPLORE_STARTS];
     let b_for = |p: Vector3<f64>| {
         // Emission offset that best matches the measurements from p.
         let mut s = 0.0;
@@ -283,6 +289,18 @@ pub fn solve(
         starts[3] = Some(Vector4::new(p[0], p[1], p[2], b_for(p)));
     }
     let dof = n - 4;
+    if guess.is_none() && dof <= 1 {
+        // Little redundancy and nothing to start from: a second solution
+        // must be looked for, or the first one found is taken for the only
+        // one. The aircraft is within reach of every receiver, so above
+        // each of them is a start near each solution.
+        let h = alt.map_or(10_000.0, |a| a.h_m);
+        for (slot, m) in starts[4..].iter_mut().zip(ms) {
+            let (_, sc) = ecef_height_fast(m.pos);
+            let p = Vector3::from(ecef_from_sin_cos(sc, h));
+            *slot = Some(Vector4::new(p[0], p[1], p[2], b_for(p)));
+        }
+    }
     let chi2_limit = if dof > 0 && limits.chi2_quantile < 1.0 {
         chi2_quantile(dof, limits.chi2_quantile)
     } else {
@@ -290,6 +308,8 @@ pub fn solve(
     };
     let mut best: Option<(Vector4<f64>, Normal, usize)> = None;
     let mut saw_failure = false;
+    // Every solution that fits, to see whether a second one does too.
+    let mut fits: [Option<Vector3<f64>>; 4 + EXPLORE_STARTS] = [None; 4 + EXPLORE_STARTS];
     for start in starts.into_iter().flatten() {
         // Bancroft's other root is often in space or inside the Earth: skip
         // starts no aircraft could be at.
@@ -300,6 +320,13 @@ pub fn solve(
         }
         match refine(start, ms, t0, alt, limits.max_iterations) {
             Some((x, nrm, it)) => {
+                let p = Vector3::new(x[0], x[1], x[2]);
+                let height = ecef_height_fast([x[0], x[1], x[2]]).0;
+                if nrm.chi2 <= chi2_limit && (limits.min_height_m..=limits.max_height_m).contains(&height) {
+                    if let Some(slot) = fits.iter_mut().find(|f| f.is_none()) {
+                        *slot = Some(p);
+                    }
+                }
                 if best.as_ref().is_none_or(|b| nrm.chi2 < b.1.chi2) {
                     best = Some((x, nrm, it));
                 }
@@ -317,6 +344,17 @@ pub fn solve(
     };
     if limits.chi2_reject && nrm.chi2 > chi2_limit {
         return Err(Reject::Residual);
+    }
+    // With little redundancy two solutions far apart can both fit (the
+    // mirror of an exactly determined group, barely told apart by one more
+    // measurement): without an earlier fix to choose, neither is the fix.
+    // Taken blindly, the better fitting one was the mirror for whole tracks,
+    // tens of kilometres off with covariances of tens of metres.
+    if guess.is_none() && dof >= 1 {
+        let here = Vector3::new(x[0], x[1], x[2]);
+        if fits.iter().flatten().any(|f| (f - here).norm() > MIRROR_APART_M) {
+            return Err(Reject::Ambiguous);
+        }
     }
     let p = [x[0], x[1], x[2]];
     let (h, [sp, cp, sl, cl]) = ecef_height_fast(p);
@@ -464,6 +502,11 @@ impl AtFix {
     pub fn residual(&self, k: usize) -> (f64, f64) {
         let (res, _, _, leverage) = self.rows[k];
         (res / C_AIR, leverage)
+    }
+
+    /// Measurement `k`'s weight in the fit (relative: 1 / its variance).
+    pub fn weight(&self, k: usize) -> f64 {
+        self.rows[k].2
     }
 
     /// The fix's height (m) as its time differences alone put it, apart

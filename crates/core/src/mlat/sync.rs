@@ -464,10 +464,24 @@ impl ClockSync {
     // Over 80 lines, kept whole: one walk of the clock tree per group (the
     // per-group path), its parts sharing the walk's stack arrays.
     pub fn common_time(&self, copies: &[LocalCopy], now: f64) -> (GroupVec<Option<(f64, f64)>>, usize) {
+        let (out, root, _) = self.common_time_anchored(copies, now);
+        (out, root)
+    }
+
+    /// [`ClockSync::common_time`], and per copy its anchor: the copy index
+    /// of the GPS-timed receiver its time came through (itself for one),
+    /// `None` without one. A GPS receiver's learnt bias moves every copy
+    /// anchored on it, so that is what its bias must be learnt from.
+    pub fn common_time_anchored(
+        &self,
+        copies: &[LocalCopy],
+        now: f64,
+    ) -> (GroupVec<Option<(f64, f64)>>, usize, GroupVec<Option<usize>>) {
         let n = copies.len();
         let mut out: GroupVec<Option<(f64, f64)>> = smallvec::smallvec![None; n];
+        let mut anchors: GroupVec<Option<usize>> = smallvec::smallvec![None; n];
         if n == 0 {
-            return (out, 0);
+            return (out, 0, anchors);
         }
         // Edge weights once per pair: offset and variance, or None when the
         // pair is not usable; the reverse edge is the same relation inverted.
@@ -509,6 +523,8 @@ impl ClockSync {
         // addition was O(n^3)). Ties go to the lowest tree index, then the
         // lowest receiver index.
         out[root] = Some((copies[root].t, 0.0));
+        let gps = |a: usize| self.clocks[copies[a].rx] == ClockKind::Gps;
+        anchors[root] = gps(root).then_some(root);
         let times = &mut out[..];
         let mut in_tree_buf: GroupVec<bool> = smallvec::smallvec![false; n];
         let in_tree = &mut in_tree_buf[..];
@@ -545,6 +561,7 @@ impl ClockSync {
             let (ta_root, _) = times[a].expect("in tree");
             let tb_in_a = copies[b].t - off;
             times[b] = Some((ta_root + (tb_in_a - copies[a].t), acc));
+            anchors[b] = if gps(b) { Some(b) } else { anchors[a] };
             added = b;
         }
         // From the root's clock to the network's: its bias taken off.
@@ -554,7 +571,7 @@ impl ClockSync {
                 *t -= root_bias;
             }
         }
-        (out, root)
+        (out, root, anchors)
     }
 }
 

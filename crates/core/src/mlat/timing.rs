@@ -226,6 +226,14 @@ impl TimingModel {
     /// [`TimingModel::judge`] gave it with the model's variance and the
     /// sync's).
     pub fn learn_judged(&mut self, r: f64, h: f64, v: Verdict) -> f64 {
+        self.learn_shifted(r, h, v, 0.0)
+    }
+
+    /// [`TimingModel::learn_judged`] with the offset stepping towards
+    /// `r + shift` instead of `r`: what the receiver's offset moves in the
+    /// fix is not its copy alone (see [`Residual`]). The copy's own residual
+    /// still teaches the core's variance and the late tail.
+    pub fn learn_shifted(&mut self, r: f64, h: f64, v: Verdict, shift: f64) -> f64 {
         let h = h.clamp(0.0, 0.95);
         let d = r / (1.0 - h);
         if v.outlier() && v.p_late < 0.5 {
@@ -236,7 +244,7 @@ impl TimingModel {
         self.n += 1;
         let a = 1.0 / (self.n as f64 + PRIOR_WEIGHT).min(MEMORY);
         let core = 1.0 - v.p_late;
-        let step = OFFSET_STEP * core * r;
+        let step = OFFSET_STEP * core * (r + shift);
         self.offset_s += step;
         // The core's variance from its share of this residual, the clock
         // synchronisation's part left in: sync errors shared by receivers
@@ -272,7 +280,7 @@ const LN_SQRT_2PI: f64 = 0.918_938_533_204_672_8;
 /// erfc(z) for z >= 0 as `t * exp(poly)`, apart so that its logarithm
 /// neither underflows for large z nor costs a logarithm of its own
 /// (Chebyshev fit, fractional error below 1.2e-7 everywhere).
-fn erfc_parts(z: f64) -> (f64, f64) {
+pub(crate) fn erfc_parts(z: f64) -> (f64, f64) {
     let t = 1.0 / (1.0 + 0.5 * z);
     let poly = -z * z - 1.265_512_23
         + t * (1.000_023_68
@@ -404,13 +412,36 @@ mod tests {
     }
 }
 
-/// One fix's lesson for one receiver's timing model.
+/// One fix's lesson for one receiver's timing model. `shift_s` is what the
+/// offset's lesson differs from the copy's residual by: a GPS-timed
+/// receiver's learnt bias also moves the counter-timed copies whose times
+/// came through it, so its offset learns from all of them together (their
+/// weighted mean residual), and those copies' own offsets from what they
+/// differ from that mean. (Taught by its own copy alone, a GPS receiver
+/// among counters synchronised through it could not see its bias, which
+/// moved them all alike, and the bias wandered by microseconds.)
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum Residual {
     /// A copy in the fix, with the verdict the fix was hedged with.
-    Judged { rx: u32, r: f64, h: f64, v: Verdict, used_offset_s: f64 },
+    Judged {
+        rx: u32,
+        r: f64,
+        h: f64,
+        v: Verdict,
+        used_offset_s: f64,
+        #[serde(default)]
+        shift_s: f64,
+    },
     /// A copy judged here against the model's variance and the sync's (`var`).
-    Against { rx: u32, r: f64, h: f64, var: f64, used_offset_s: f64 },
+    Against {
+        rx: u32,
+        r: f64,
+        h: f64,
+        var: f64,
+        used_offset_s: f64,
+        #[serde(default)]
+        shift_s: f64,
+    },
 }
 
 impl Residual {
@@ -477,8 +508,11 @@ impl Lessons {
         let m = models.model(r.rx());
         let d = r.against(m.offset());
         self.sum += match *r {
-            Residual::Judged { h, v, .. } => m.learn_judged(d, h, v),
-            Residual::Against { h, var, .. } => m.learn(d, h, var),
+            Residual::Judged { h, v, shift_s, .. } => m.learn_shifted(d, h, v, shift_s),
+            Residual::Against { h, var, shift_s, .. } => {
+                let v = m.judge(d, h, m.var_s2 + var);
+                m.learn_shifted(d, h, v, shift_s)
+            }
         };
         self.moved.push(r.rx());
     }

@@ -221,6 +221,7 @@ impl Mlat {
         sites: &[Site],
         sync_vars: &[f64],
         dropped: &Dropped,
+        anchors: &[(usize, Option<usize>)],
         now: f64,
     ) {
         // In a cluster the lessons go to the clock service, which learns
@@ -229,6 +230,7 @@ impl Mlat {
         let anchored = sites.iter().any(|site| site.iter().any(|&rx| self.rxs[rx].timing_known));
         let mut res: GroupVec<Residual> = GroupVec::new();
         let mut lessons = Lessons::new(anchored);
+        let shifts = self.cluster_shifts(judged, sites, anchors);
         for (k, (site, &var)) in sites.iter().zip(sync_vars).enumerate() {
             let (r, h) = judged.at.residual(k);
             // A merged site's residual is no single receiver's (nor verdict).
@@ -241,10 +243,11 @@ impl Mlat {
             // The verdict the fix was hedged with, unless the fix weighted
             // the receiver at its floor rather than its learnt sigma.
             let used_offset_s = rx_state.timing.offset();
+            let shift_s = shifts[k];
             let lesson = if rx_state.sigma() == rx_state.timing.sigma() {
-                Residual::Judged { rx: rx as u32, r, h, v, used_offset_s }
+                Residual::Judged { rx: rx as u32, r, h, v, used_offset_s, shift_s }
             } else {
-                Residual::Against { rx: rx as u32, r, h, var, used_offset_s }
+                Residual::Against { rx: rx as u32, r, h, var, used_offset_s, shift_s }
             };
             match shared {
                 true => res.push(lesson),
@@ -257,7 +260,8 @@ impl Mlat {
             }
             let r = m.t - fix.t_emit - ecef_distance(m.pos, fix.ecef) / C_AIR;
             let used_offset_s = self.rxs[site[0]].timing.offset();
-            let lesson = Residual::Against { rx: site[0] as u32, r, h: 0.0, var: *var, used_offset_s };
+            let lesson =
+                Residual::Against { rx: site[0] as u32, r, h: 0.0, var: *var, used_offset_s, shift_s: 0.0 };
             match shared {
                 true => res.push(lesson),
                 false => lessons.teach(&lesson, &mut self.rxs),
@@ -273,6 +277,61 @@ impl Mlat {
             self.rxs[rx].lesson_at(now);
             self.sync.set_gps_bias(rx, self.rxs[rx].bias());
         }
+    }
+}
+
+impl Mlat {
+    /// Per site, what its offset's lesson differs from its residual by
+    /// (see [`Residual`]): a GPS-timed receiver learns the weighted mean
+    /// residual of the sites anchored on it (its own and the counters'
+    /// whose times came through it), and those counters what they differ
+    /// from that mean. Only where the receiver learns from this fix and
+    /// something came through it; elsewhere nothing.
+    fn cluster_shifts(
+        &self,
+        judged: &Judged,
+        sites: &[Site],
+        anchors: &[(usize, Option<usize>)],
+    ) -> GroupVec<f64> {
+        let mut shifts: GroupVec<f64> = smallvec::smallvec![0.0; sites.len()];
+        let anchor_of = |k: usize| -> Option<usize> {
+            let site = &sites[k];
+            let rx = *site.first()?;
+            (site.len() == 1).then_some(())?;
+            anchors.iter().find(|(r, _)| *r == rx).and_then(|(_, a)| *a)
+        };
+        let site_anchor: GroupVec<Option<usize>> = (0..sites.len()).map(anchor_of).collect();
+        for (k, site) in sites.iter().enumerate() {
+            // Site k is a GPS receiver that learns here: the copies anchored on it.
+            let rx = site[0];
+            if site_anchor[k] != Some(rx) || judged.verdicts[k].is_none() || self.rxs[rx].timing_known {
+                continue;
+            }
+            if judged.at.residual(k).1 >= 0.95 {
+                continue;
+            }
+            let (mut sum, mut weight, mut members) = (0.0, 0.0, 0);
+            for (j, a) in site_anchor.iter().enumerate() {
+                if *a != Some(rx) {
+                    continue;
+                }
+                let Some(v) = judged.verdicts[j] else { continue };
+                let w = judged.at.weight(j) * (1.0 - v.p_late);
+                sum += w * judged.at.residual(j).0;
+                weight += w;
+                members += 1;
+            }
+            if members < 2 || weight <= 0.0 {
+                continue;
+            }
+            let mean = sum / weight;
+            for (j, a) in site_anchor.iter().enumerate() {
+                if *a == Some(rx) {
+                    shifts[j] = if j == k { mean - judged.at.residual(j).0 } else { -mean };
+                }
+            }
+        }
+        shifts
     }
 }
 
