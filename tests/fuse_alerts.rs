@@ -105,6 +105,34 @@ fn spoofers_2_km_and_300_m_off_are_flagged_within_seconds_and_kept_out() {
     assert!(alerts(&honest, "adsb_suspect").is_empty());
 }
 
+/// Heard by three receivers only (three sites and the altitude: two
+/// solutions, never a fix), a spoofer is caught by its time differences
+/// against the position it reports, and an honest aircraft is not.
+#[test]
+fn spoofers_heard_by_three_receivers_only_are_flagged_by_their_time_differences() {
+    let three = |offset: Option<[f64; 2]>| {
+        let mut s = scenario("fusion-8seg-1hz");
+        s.receiver.truncate(3);
+        s.aircraft[0].spoof_offset_m = offset;
+        run(&s).0
+    };
+    for offset in [[2000.0, 0.0], [0.0, -500.0]] {
+        let records = three(Some(offset));
+        assert!(!records.iter().any(|r| r["type"] == "mlat"), "three sites gave a fix");
+        let flags = alerts(&records, "adsb_suspect");
+        let first = flags.first().unwrap_or_else(|| panic!("{offset:?}: not flagged"));
+        assert_eq!(first["suspect"], true);
+        // No fix, so no offset to report.
+        assert!(first.get("offset_m").is_none(), "{first}");
+        let start = records.iter().find_map(|r| r["t"].as_f64()).unwrap();
+        let delay = first["t"].as_f64().unwrap() - start;
+        assert!(delay < 10.0, "{offset:?}: flagged {delay:.1} s into the run");
+        assert!(flags.iter().all(|f| f["suspect"] == true), "{offset:?}: cleared: {flags:?}");
+    }
+    let honest = three(None);
+    assert!(alerts(&honest, "adsb_suspect").is_empty(), "{:?}", alerts(&honest, "adsb_suspect"));
+}
+
 #[test]
 fn tma_busy_both_spoofers_flagged_and_no_honest_aircraft() {
     let mut s = scenario("tma-busy");

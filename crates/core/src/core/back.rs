@@ -48,7 +48,7 @@ pub enum Cmd {
         addr: u32,
         t: f64,
         suspect: bool,
-        offset_m: f64,
+        offset_m: Option<f64>,
         nis: f64,
     },
     /// Time moved forward (arrival-time scale).

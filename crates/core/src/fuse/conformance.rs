@@ -65,7 +65,8 @@ pub struct Monitor {
     conforming: u32,
     /// Newest test value and offset (m), for the alert.
     pub last_nis: f64,
-    pub last_offset_m: f64,
+    /// The offset is a fix's: time differences alone tell none.
+    pub last_offset_m: Option<f64>,
     /// While flagged: the offset (east, north m) flagged for, followed over
     /// the fixes that do not conform.
     flagged_offset: Option<[f64; 2]>,
@@ -85,8 +86,32 @@ impl Monitor {
         let test = |d: [f64; 2]| {
             (s[1][1] * d[0] * d[0] - (s[0][1] + s[1][0]) * d[0] * d[1] + s[0][0] * d[1] * d[1]) / det
         };
-        let nis = test(d);
-        // Flagged: a fix that would pass the offset flagged for cannot
+        self.judge(cfg, test(d), Some(d), test)
+    }
+
+    /// One transmission too few receivers heard for a fix: `test` gives
+    /// the chi-square(2) equivalent of its time differences at the
+    /// reported position moved by an east/north offset (m), `[0, 0]` the
+    /// position as reported (see [`tdoa_test`]). Returns the new flag when
+    /// it changed.
+    pub fn push_tdoa(&mut self, cfg: &ConformanceConfig, test: impl Fn([f64; 2]) -> f64) -> Option<bool> {
+        let nis = test([0.0, 0.0]);
+        if !nis.is_finite() {
+            return None;
+        }
+        self.judge(cfg, nis, None, test)
+    }
+
+    /// The CUSUM step for one test value `nis`; `d` the offset it saw when
+    /// it is a fix's, `test` what it would make of another offset.
+    fn judge(
+        &mut self,
+        cfg: &ConformanceConfig,
+        nis: f64,
+        d: Option<[f64; 2]>,
+        test: impl Fn([f64; 2]) -> f64,
+    ) -> Option<bool> {
+        // Flagged: a test that would pass the offset flagged for cannot
         // clear it (nor tell anything else).
         if let (true, Some(o)) = (self.suspect, self.flagged_offset) {
             if test(o) < cfg.reference {
@@ -94,7 +119,7 @@ impl Monitor {
             }
         }
         self.last_nis = nis;
-        self.last_offset_m = d[0].hypot(d[1]);
+        self.last_offset_m = d.map(|d| d[0].hypot(d[1]));
         // Capped at twice the threshold, so a flag clears in a few
         // conforming fixes however far off the aircraft was.
         // One fix moves the sum by at most 60% of the threshold: a single
@@ -103,7 +128,9 @@ impl Monitor {
         self.sum = (self.sum + step).clamp(0.0, 2.0 * cfg.threshold);
         let fits = nis < cfg.reference;
         self.conforming = if fits { self.conforming + 1 } else { 0 };
-        if !fits {
+        // Time differences see an offset along some directions only: they
+        // tell no offset to follow.
+        if let (false, Some(d)) = (fits, d) {
             self.flagged_offset = Some(match self.flagged_offset {
                 Some(o) if self.suspect => [0, 1].map(|k| o[k] + OFFSET_WEIGHT * (d[k] - o[k])),
                 _ => d,
@@ -120,6 +147,60 @@ impl Monitor {
         }
         None
     }
+}
+
+/// Time differences of a transmission against the position it reported:
+/// each site `(ECEF m, time s, sigma s)`, the reported position `p` (ECEF)
+/// with its horizontal sigma per axis and its vertical sigma (m), and `enu`
+/// the east, north and up unit vectors there. Returns what the differences
+/// make of the position moved by an east/north offset (m): their chi-square
+/// (one or two degrees of freedom, the reported position's error and every
+/// site's timing in their covariance) as the chi-square(2) value of the same
+/// tail probability, so that the fixes' CUSUM takes it as it is. `None`
+/// with fewer than two sites.
+pub fn tdoa_test(
+    sites: &[([f64; 3], f64, f64)],
+    p: [f64; 3],
+    sigma_h_m: f64,
+    sigma_v_m: f64,
+    enu: [[f64; 3]; 3],
+) -> Option<impl Fn([f64; 2]) -> f64 + '_> {
+    use crate::mlat::solver::C_AIR;
+    use nalgebra::{DMatrix, DVector, Vector3};
+    let k = sites.len().checked_sub(1).filter(|&k| (1..=2).contains(&k))?;
+    let at = move |off: [f64; 2]| -> f64 {
+        let (e, n, u) = (Vector3::from(enu[0]), Vector3::from(enu[1]), Vector3::from(enu[2]));
+        let q = Vector3::from(p) + e * off[0] + n * off[1];
+        let dir = |s: [f64; 3]| (q - Vector3::from(s)).normalize() / C_AIR;
+        let (s0, t0, sig0) = sites[0];
+        let mut r = DVector::zeros(k);
+        let mut cov = DMatrix::from_element(k, k, sig0 * sig0);
+        for i in 0..k {
+            let (si, ti, sigi) = sites[i + 1];
+            let predicted = ((q - Vector3::from(si)).norm() - (q - Vector3::from(s0)).norm()) / C_AIR;
+            r[i] = (ti - t0) - predicted;
+            cov[(i, i)] += sigi * sigi;
+        }
+        // The reported position's own error, through each difference's gradient.
+        let grads: Vec<Vector3<f64>> = (0..k).map(|i| dir(sites[i + 1].0) - dir(s0)).collect();
+        for i in 0..k {
+            for j in 0..k {
+                let (gi, gj) = (grads[i], grads[j]);
+                let h = sigma_h_m * sigma_h_m * (gi.dot(&e) * gj.dot(&e) + gi.dot(&n) * gj.dot(&n));
+                cov[(i, j)] += h + sigma_v_m * sigma_v_m * gi.dot(&u) * gj.dot(&u);
+            }
+        }
+        let Some(chol) = cov.cholesky() else { return f64::NAN };
+        let chi2 = r.dot(&chol.solve(&r));
+        if k == 2 {
+            chi2
+        } else {
+            // P(chi2(1) > x) = erfc(sqrt(x / 2)); chi2(2) with that tail is -2 ln of it.
+            let (t, poly) = crate::mlat::timing::erfc_parts((chi2 / 2.0).sqrt());
+            -2.0 * (t.ln() + poly)
+        }
+    };
+    Some(at)
 }
 
 #[cfg(test)]
@@ -163,6 +244,57 @@ mod tests {
             }
             assert!(k >= cfg.clear_after as usize);
         }
+    }
+
+    /// Time differences of two and three sites against an honest report:
+    /// the chi-square(2) equivalent has its mean and its tail; against a
+    /// report 300 m off, it is far beyond the reference.
+    #[test]
+    fn time_differences_judge_a_reported_position() {
+        use crate::geo::geodetic_to_ecef;
+        use crate::mlat::solver::C_AIR;
+        use crate::mlat::survey::enu_basis;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2);
+        let (lat, lon, h) = (48.0, 8.0, 9_000.0);
+        let enu = enu_basis(lat, lon);
+        let sites = [(47.6, 7.7), (48.5, 8.1), (47.9, 8.6)].map(|(a, b)| geodetic_to_ecef(a, b, 300.0));
+        let (sigma_t, sigma_h, sigma_v) = (100e-9, 40.0, 30.0);
+        let unit = Normal::new(0.0, 1.0).unwrap();
+        for k in [2, 3] {
+            let (mut sum, mut far, mut beyond, n) = (0.0, 0.0, 0, 20_000);
+            for _ in 0..n {
+                let truth = geodetic_to_ecef(lat, lon, h);
+                let times: Vec<_> = sites[..k]
+                    .iter()
+                    .map(|&s| {
+                        let d = nalgebra::Vector3::from(truth) - nalgebra::Vector3::from(s);
+                        (s, d.norm() / C_AIR + sigma_t * unit.sample(&mut rng), sigma_t)
+                    })
+                    .collect();
+                let (de, dn, du) = (
+                    sigma_h * unit.sample(&mut rng),
+                    sigma_h * unit.sample(&mut rng),
+                    sigma_v * unit.sample(&mut rng),
+                );
+                let reported = [0, 1, 2].map(|i| truth[i] + de * enu[0][i] + dn * enu[1][i] + du * enu[2][i]);
+                let test = tdoa_test(&times, reported, sigma_h, sigma_v, enu).unwrap();
+                let x = test([0.0, 0.0]);
+                sum += x;
+                beyond += (x > 13.8) as u32;
+                // The same transmission against the report 300 m off.
+                far += test([300.0, 0.0]).max(test([0.0, 300.0]));
+            }
+            let mean = sum / n as f64;
+            assert!((mean - 2.0).abs() < 0.1, "{k} sites: mean {mean:.3}");
+            let far = far / n as f64;
+            assert!(
+                far > 3.0 * ConformanceConfig::default().reference,
+                "{k} sites: 300 m off, mean {far:.1}"
+            );
+            // P(chi2(2) > 13.8) = 0.001.
+            assert!(beyond < 45, "{k} sites: {beyond} of {n} beyond the 0.999 quantile");
+        }
+        assert!(tdoa_test(&[(sites[0], 0.0, sigma_t)], sites[1], sigma_h, sigma_v, enu).is_none());
     }
 
     /// A spoofer flagged for 300 m is not cleared by fixes too wide to see

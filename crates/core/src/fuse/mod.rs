@@ -501,7 +501,7 @@ impl Fuser {
         addr: u32,
         t: f64,
         suspect: bool,
-        offset_m: f64,
+        offset_m: Option<f64>,
         nis: f64,
         out: &mut Vec<Output>,
     ) {
@@ -513,7 +513,7 @@ impl Fuser {
         a.fused.set_spec(t, if suspect { &self.spec_mlat_only } else { &self.spec }.clone());
         self.stats.suspect_flags += suspect as u64;
         if suspect {
-            tracing::warn!(hex = format!("{addr:06X}"), offset_m, "ADS-B position contradicted by timing");
+            tracing::warn!(hex = format!("{addr:06X}"), ?offset_m, "ADS-B position contradicted by timing");
         }
         out.push(Output::Alert(Alert::AdsbSuspect { t, addr, id: a.id, suspect, offset_m, nis }));
     }

@@ -18,7 +18,7 @@ pub enum Output {
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum Alert {
     /// The timing contradicts (or again confirms) an aircraft's ADS-B positions.
-    AdsbSuspect { t: f64, addr: u32, id: u64, suspect: bool, offset_m: f64, nis: f64 },
+    AdsbSuspect { t: f64, addr: u32, id: u64, suspect: bool, offset_m: Option<f64>, nis: f64 },
     /// A predicted conflict starts (or ends) between two tracks.
     Conflict { t: f64, pair: [(u32, u64); 2], active: bool, tau_s: f64, t_cpa_s: f64, miss_m: f64, dz_m: f64 },
 }

@@ -131,7 +131,7 @@ fn multilaterated(mlat_only: bool, seed: u64, adsb_first: bool, suspect: bool) -
         let (lat, lon, _) = at(100.0);
         f.on_measurement(1, Some(8), pos(100.0, lat, lon), 100.0, &mut out);
         if suspect {
-            f.set_suspect(1, 100.0, true, 2000.0, 100.0, &mut out);
+            f.set_suspect(1, 100.0, true, Some(2000.0), 100.0, &mut out);
         }
     }
     for k in 1..430 {

@@ -288,10 +288,16 @@ fn track(out: &mut Vec<u8>, r: &TrackReport) {
 pub fn alert_record(a: &Alert) -> serde_json::Value {
     let hex = Hex::addr;
     match *a {
-        Alert::AdsbSuspect { t, addr, id, suspect, offset_m, nis } => serde_json::json!({
-            "type": "alert", "kind": "adsb_suspect", "t": round(t, 1e6), "hex": hex(addr), "id": id,
-            "suspect": suspect, "offset_m": round(offset_m, 10.0), "nis": round(nis, 100.0),
-        }),
+        Alert::AdsbSuspect { t, addr, id, suspect, offset_m, nis } => {
+            let mut r = serde_json::json!({
+                "type": "alert", "kind": "adsb_suspect", "t": round(t, 1e6), "hex": hex(addr), "id": id,
+                "suspect": suspect, "nis": round(nis, 100.0),
+            });
+            if let Some(o) = offset_m {
+                r["offset_m"] = serde_json::json!(round(o, 10.0));
+            }
+            r
+        }
         Alert::Conflict { t, pair, active, tau_s, t_cpa_s, miss_m, dz_m } => serde_json::json!({
             "type": "alert", "kind": "conflict", "t": round(t, 1e6),
             "pair": [hex(pair[0].0), hex(pair[1].0)], "ids": [pair[0].1, pair[1].1], "active": active,

@@ -8,13 +8,21 @@ use super::*;
 /// The least share of a fix's timing variance counted as independent of
 /// its aircraft's ADS-B (a 100-fold inflation at most).
 const MIN_INDEPENDENT_SHARE: f64 = 0.01;
+/// Vertical sigma (m) of a reported position's height: its 25 ft steps
+/// and the GNSS-baro difference's error; and of a height from barometric
+/// altitude alone, without that difference.
+const REPORTED_HEIGHT_SIGMA_M: f64 = 30.0;
+const BARO_ONLY_SIGMA_M: f64 = 150.0;
 
 impl GroupCtx<'_> {
     pub(super) fn on_group(&mut self, g: &Group, now: f64, cmds: &mut Vec<Cmd>) {
         self.learn_delay(g);
         let fix = match self.mlat.on_group(g, now) {
             GroupOutcome::Fix(fix) => fix,
-            GroupOutcome::Tdoa(t) => return cmds.push(Cmd::Tdoa { g: t, now }),
+            GroupOutcome::Tdoa(t) => {
+                self.tdoa_conformance(g, &t, cmds);
+                return cmds.push(Cmd::Tdoa { g: t, now });
+            }
             // Counted by the engine.
             GroupOutcome::NoFix(_) => return,
         };
@@ -72,6 +80,32 @@ impl GroupCtx<'_> {
             }
         }
         cmds.push(Cmd::Measure { addr, nac_p: None, m, now });
+    }
+
+    /// The same transmission's ADS-B position against its time differences,
+    /// where too few receivers heard it for a fix: a spoofer that only two
+    /// or three receivers hear is caught as one that more hear is.
+    fn tdoa_conformance(&mut self, g: &Group, t: &crate::mlat::engine::TdoaGroup, cmds: &mut Vec<Cmd>) {
+        let Some((lat, lon, sigma)) = g.info.report else { return };
+        let (h, sigma_v) = match (g.info.adsb_ecef, g.info.alt_baro_ft) {
+            (Some(e), _) => (crate::geo::ecef_to_geodetic(e).2, REPORTED_HEIGHT_SIGMA_M),
+            (None, Some(ft)) => baro_height(ft, g.info.baro_correction, BARO_ONLY_SIGMA_M),
+            (None, None) => return,
+        };
+        let p = geodetic_to_ecef(lat, lon, h);
+        let enu = crate::mlat::survey::enu_basis(lat, lon);
+        let Some(test) = crate::fuse::conformance::tdoa_test(&t.sites, p, sigma, sigma_v, enu) else {
+            return;
+        };
+        self.stats.conformance_checks += 1;
+        let heard = g.first_arrival;
+        let w = (self.watched.entry(t.addr))
+            .or_insert(Watched { monitor: Monitor::default(), last_heard: heard });
+        w.last_heard = heard;
+        if let Some(suspect) = w.monitor.push_tdoa(self.conformance, test) {
+            let (offset_m, nis) = (w.monitor.last_offset_m, w.monitor.last_nis);
+            cmds.push(Cmd::Suspect { addr: t.addr, t: t.t, suspect, offset_m, nis });
+        }
     }
 
     /// A transmission whose first copy (the one decoded and reported) came
