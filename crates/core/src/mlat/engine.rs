@@ -426,7 +426,8 @@ impl Mlat {
             Ok(ac) => ac,
             Err(why) => return GroupOutcome::NoFix(why),
         };
-        let (times, root, anchor_copies) = self.sync.common_time_anchored(&copies, now);
+        let super::sync::CommonTime { times, root, anchors: anchor_copies } =
+            self.sync.common_time_anchored(&copies, now);
         if let (Some(a), false) = (info.adsb_ecef, info.suspect) {
             match &all_copies {
                 None => self.survey_from(&copies, &times, a, info.adsb_sigma_m, now),
@@ -485,7 +486,7 @@ impl Mlat {
         if let Some(j) = judged.as_ref().filter(|_| self.cfg.calibrate && fix.dof >= 1) {
             let anchors: GroupVec<(usize, Option<usize>)> =
                 (copies.iter().zip(&anchor_copies)).map(|(c, a)| (c.rx, a.map(|a| copies[a].rx))).collect();
-            self.learn(j, &fix, &g.sites, &g.sync_vars, &g.dropped, &anchors, now);
+            self.learn(j, &fix, &g, &anchors, now);
         }
         self.remember_fix(info.addr, &fix, judged.as_ref().map(|j| &j.at), (alt, baro), now);
         if fix.dof >= 1 {

@@ -464,24 +464,20 @@ impl ClockSync {
     // Over 80 lines, kept whole: one walk of the clock tree per group (the
     // per-group path), its parts sharing the walk's stack arrays.
     pub fn common_time(&self, copies: &[LocalCopy], now: f64) -> (GroupVec<Option<(f64, f64)>>, usize) {
-        let (out, root, _) = self.common_time_anchored(copies, now);
-        (out, root)
+        let t = self.common_time_anchored(copies, now);
+        (t.times, t.root)
     }
 
     /// [`ClockSync::common_time`], and per copy its anchor: the copy index
     /// of the GPS-timed receiver its time came through (itself for one),
     /// `None` without one. A GPS receiver's learnt bias moves every copy
     /// anchored on it, so that is what its bias must be learnt from.
-    pub fn common_time_anchored(
-        &self,
-        copies: &[LocalCopy],
-        now: f64,
-    ) -> (GroupVec<Option<(f64, f64)>>, usize, GroupVec<Option<usize>>) {
+    pub fn common_time_anchored(&self, copies: &[LocalCopy], now: f64) -> CommonTime {
         let n = copies.len();
         let mut out: GroupVec<Option<(f64, f64)>> = smallvec::smallvec![None; n];
         let mut anchors: GroupVec<Option<usize>> = smallvec::smallvec![None; n];
         if n == 0 {
-            return (out, 0, anchors);
+            return CommonTime { times: out, root: 0, anchors };
         }
         // Edge weights once per pair: offset and variance, or None when the
         // pair is not usable; the reverse edge is the same relation inverted.
@@ -571,8 +567,19 @@ impl ClockSync {
                 *t -= root_bias;
             }
         }
-        (out, root, anchors)
+        CommonTime { times: out, root, anchors }
     }
+}
+
+/// A transmission's copies on one time base ([`ClockSync::common_time_anchored`]).
+pub struct CommonTime {
+    /// Per copy: its time and the conversion's variance, `None` if unreachable.
+    pub times: GroupVec<Option<(f64, f64)>>,
+    /// The root's copy index.
+    pub root: usize,
+    /// Per copy: the copy index of the GPS-timed receiver its time came
+    /// through (itself for one), `None` without one.
+    pub anchors: GroupVec<Option<usize>>,
 }
 
 #[cfg(test)]

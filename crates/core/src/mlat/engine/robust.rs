@@ -218,12 +218,11 @@ impl Mlat {
         &mut self,
         judged: &Judged,
         fix: &crate::mlat::solver::Fix,
-        sites: &[Site],
-        sync_vars: &[f64],
-        dropped: &Dropped,
+        g: &GroupCopies,
         anchors: &[(usize, Option<usize>)],
         now: f64,
     ) {
+        let (sites, sync_vars, dropped) = (&g.sites[..], &g.sync_vars[..], &g.dropped);
         // In a cluster the lessons go to the clock service, which learns
         // once for every worker; here they are learnt as they come.
         let shared = self.shared.is_some();
