@@ -7,7 +7,9 @@
 //! makes three receivers enough and stabilises weak geometry.
 //!
 //! Start: Bancroft's closed form (4+ receivers; both roots are tried, which
-//! handles the mirror solution) or a caller's guess; then Levenberg-Marquardt
+//! handles the mirror solution) or a caller's guess; with one degree of
+//! freedom or none and no guess, also starts that look for a second
+//! solution (a group two solutions fit is ambiguous); then Levenberg-Marquardt
 //! on 4x4 normal equations with nalgebra fixed-size matrices (no heap).
 //! Covariance from the weighted Jacobian at the solution, scaled by the
 //! residual chi-square when that exceeds its degrees of freedom, so a fix
@@ -242,6 +244,22 @@ const MIRROR_APART_M: f64 = 1_000.0;
 /// Starts above the first receivers, for a group with little redundancy
 /// and no earlier fix.
 const EXPLORE_STARTS: usize = 4;
+/// Radii (m) of the rings of starts around a first solution.
+const RING_RADII_M: [f64; 2] = [40_000.0, 90_000.0];
+
+/// Starts around `p` (ECEF), at its height: eight bearings at each of
+/// [`RING_RADII_M`].
+fn ring_starts(p: Vector3<f64>) -> impl Iterator<Item = Vector3<f64>> {
+    let u = p.normalize();
+    let e1 = Vector3::z().cross(&u).try_normalize(1e-9).unwrap_or_else(Vector3::x);
+    let e2 = u.cross(&e1);
+    RING_RADII_M.into_iter().flat_map(move |r| {
+        (0..8).map(move |k| {
+            let a = k as f64 * std::f64::consts::FRAC_PI_4;
+            p + (e1 * a.cos() + e2 * a.sin()) * r
+        })
+    })
+}
 
 /// Solves for the emitter. `guess` (ECEF) is tried first when given.
 // Over 80 lines, kept whole: start, Levenberg-Marquardt iterations and
@@ -309,7 +327,7 @@ pub fn solve(
     let mut best: Option<(Vector4<f64>, Normal, usize)> = None;
     let mut saw_failure = false;
     // Every solution that fits, to see whether a second one does too.
-    let mut fits: [Option<Vector3<f64>>; 4 + EXPLORE_STARTS] = [None; 4 + EXPLORE_STARTS];
+    let mut fits: [Option<Vector3<f64>>; 4 + EXPLORE_STARTS + 16] = [None; 4 + EXPLORE_STARTS + 16];
     for start in starts.into_iter().flatten() {
         // Bancroft's other root is often in space or inside the Earth: skip
         // starts no aircraft could be at.
@@ -337,6 +355,26 @@ pub fn solve(
                 }
             }
             None => saw_failure = true,
+        }
+    }
+    if let (None, true, Some(b)) = (guess, dof <= 1, &best) {
+        // Receivers nearly in a line see the aircraft and a second solution
+        // alike, and starts near them fall to either side: a ring of starts
+        // around the first solution looks for the other.
+        let first = Vector3::new(b.0[0], b.0[1], b.0[2]);
+        for start in ring_starts(first) {
+            let start = Vector4::new(start[0], start[1], start[2], b_for(start));
+            if let Some((x, nrm, it)) = refine(start, ms, t0, alt, limits.max_iterations) {
+                let height = ecef_height_fast([x[0], x[1], x[2]]).0;
+                if nrm.chi2 <= chi2_limit && (limits.min_height_m..=limits.max_height_m).contains(&height) {
+                    if let Some(slot) = fits.iter_mut().find(|f| f.is_none()) {
+                        *slot = Some(Vector3::new(x[0], x[1], x[2]));
+                    }
+                }
+                if best.as_ref().is_none_or(|b| nrm.chi2 < b.1.chi2) {
+                    best = Some((x, nrm, it));
+                }
+            }
         }
     }
     let Some((x, nrm, iterations)) = best else {
