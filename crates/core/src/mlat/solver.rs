@@ -328,6 +328,19 @@ pub fn solve(
     let mut saw_failure = false;
     // Every solution that fits, to see whether a second one does too.
     let mut fits: [Option<Vector3<f64>>; 4 + EXPLORE_STARTS + 16] = [None; 4 + EXPLORE_STARTS + 16];
+    // A refined start: kept among the fits if it fits, and as the best if it is.
+    let mut take = |(x, nrm, it): (Vector4<f64>, Normal, usize),
+                    best: &mut Option<(Vector4<f64>, Normal, usize)>| {
+        let height = ecef_height_fast([x[0], x[1], x[2]]).0;
+        if nrm.chi2 <= chi2_limit && (limits.min_height_m..=limits.max_height_m).contains(&height) {
+            if let Some(slot) = fits.iter_mut().find(|f| f.is_none()) {
+                *slot = Some(Vector3::new(x[0], x[1], x[2]));
+            }
+        }
+        if best.as_ref().is_none_or(|b| nrm.chi2 < b.1.chi2) {
+            *best = Some((x, nrm, it));
+        }
+    };
     for start in starts.into_iter().flatten() {
         // Bancroft's other root is often in space or inside the Earth: skip
         // starts no aircraft could be at.
@@ -337,17 +350,8 @@ pub fn solve(
             continue;
         }
         match refine(start, ms, t0, alt, limits.max_iterations) {
-            Some((x, nrm, it)) => {
-                let p = Vector3::new(x[0], x[1], x[2]);
-                let height = ecef_height_fast([x[0], x[1], x[2]]).0;
-                if nrm.chi2 <= chi2_limit && (limits.min_height_m..=limits.max_height_m).contains(&height) {
-                    if let Some(slot) = fits.iter_mut().find(|f| f.is_none()) {
-                        *slot = Some(p);
-                    }
-                }
-                if best.as_ref().is_none_or(|b| nrm.chi2 < b.1.chi2) {
-                    best = Some((x, nrm, it));
-                }
+            Some(refined) => {
+                take(refined, &mut best);
                 // A clean fit from a good start needs no second opinion.
                 if best.as_ref().is_some_and(|b| b.1.chi2 <= chi2_limit * 0.5 || dof == 0) && guess.is_some()
                 {
@@ -364,16 +368,8 @@ pub fn solve(
         let first = Vector3::new(b.0[0], b.0[1], b.0[2]);
         for start in ring_starts(first) {
             let start = Vector4::new(start[0], start[1], start[2], b_for(start));
-            if let Some((x, nrm, it)) = refine(start, ms, t0, alt, limits.max_iterations) {
-                let height = ecef_height_fast([x[0], x[1], x[2]]).0;
-                if nrm.chi2 <= chi2_limit && (limits.min_height_m..=limits.max_height_m).contains(&height) {
-                    if let Some(slot) = fits.iter_mut().find(|f| f.is_none()) {
-                        *slot = Some(Vector3::new(x[0], x[1], x[2]));
-                    }
-                }
-                if best.as_ref().is_none_or(|b| nrm.chi2 < b.1.chi2) {
-                    best = Some((x, nrm, it));
-                }
+            if let Some(refined) = refine(start, ms, t0, alt, limits.max_iterations) {
+                take(refined, &mut best);
             }
         }
     }

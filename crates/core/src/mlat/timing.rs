@@ -218,8 +218,14 @@ impl TimingModel {
     /// (beside the model's own in judging it).
     /// Returns the step its offset took (see [`TimingModel::shift`]).
     pub fn learn(&mut self, r: f64, h: f64, sync_var_s2: f64) -> f64 {
+        self.learn_against(r, h, sync_var_s2, 0.0)
+    }
+
+    /// [`TimingModel::learn`] with the offset's lesson shifted (see
+    /// [`TimingModel::learn_shifted`]).
+    pub fn learn_against(&mut self, r: f64, h: f64, sync_var_s2: f64, shift: f64) -> f64 {
         let v = self.judge(r, h, self.var_s2 + sync_var_s2);
-        self.learn_judged(r, h, v)
+        self.learn_shifted(r, h, v, shift)
     }
 
     /// [`TimingModel::learn`] with the residual already judged (`v`, as
@@ -509,10 +515,7 @@ impl Lessons {
         let d = r.against(m.offset());
         self.sum += match *r {
             Residual::Judged { h, v, shift_s, .. } => m.learn_shifted(d, h, v, shift_s),
-            Residual::Against { h, var, shift_s, .. } => {
-                let v = m.judge(d, h, m.var_s2 + var);
-                m.learn_shifted(d, h, v, shift_s)
-            }
+            Residual::Against { h, var, shift_s, .. } => m.learn_against(d, h, var, shift_s),
         };
         self.moved.push(r.rx());
     }

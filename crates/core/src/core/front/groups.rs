@@ -65,19 +65,8 @@ impl GroupCtx<'_> {
                 [v + c[0][0] * inflation, c[0][1] * inflation],
                 [c[1][0] * inflation, v + c[1][1] * inflation],
             ];
-            self.stats.conformance_checks += 1;
-            // Heard when its first copy arrived, not when the group was
-            // handed out (at the end of a capture, much later).
-            let heard = g.first_arrival;
-            let w = self
-                .watched
-                .entry(addr)
-                .or_insert(Watched { monitor: Monitor::default(), last_heard: heard });
-            w.last_heard = heard;
-            if let Some(suspect) = w.monitor.push(self.conformance, d, s) {
-                let (offset_m, nis) = (w.monitor.last_offset_m, w.monitor.last_nis);
-                cmds.push(Cmd::Suspect { addr, t, suspect, offset_m, nis });
-            }
+            let cfg = self.conformance;
+            self.conformance_check(g, addr, t, cmds, |m| m.push(cfg, d, s));
         }
         cmds.push(Cmd::Measure { addr, nac_p: None, m, now });
     }
@@ -97,14 +86,30 @@ impl GroupCtx<'_> {
         let Some(test) = crate::fuse::conformance::tdoa_test(&t.sites, p, sigma, sigma_v, enu) else {
             return;
         };
+        let cfg = self.conformance;
+        self.conformance_check(g, t.addr, t.t, cmds, |m| m.push_tdoa(cfg, test));
+    }
+
+    /// One check of aircraft `addr`'s ADS-B by the conformance monitor
+    /// (`check` pushes it), and the alert when its verdict changed.
+    fn conformance_check(
+        &mut self,
+        g: &Group,
+        addr: u32,
+        t: f64,
+        cmds: &mut Vec<Cmd>,
+        check: impl FnOnce(&mut Monitor) -> Option<bool>,
+    ) {
         self.stats.conformance_checks += 1;
+        // Heard when its first copy arrived, not when the group was
+        // handed out (at the end of a capture, much later).
         let heard = g.first_arrival;
-        let w = (self.watched.entry(t.addr))
-            .or_insert(Watched { monitor: Monitor::default(), last_heard: heard });
+        let w =
+            (self.watched.entry(addr)).or_insert(Watched { monitor: Monitor::default(), last_heard: heard });
         w.last_heard = heard;
-        if let Some(suspect) = w.monitor.push_tdoa(self.conformance, test) {
+        if let Some(suspect) = check(&mut w.monitor) {
             let (offset_m, nis) = (w.monitor.last_offset_m, w.monitor.last_nis);
-            cmds.push(Cmd::Suspect { addr: t.addr, t: t.t, suspect, offset_m, nis });
+            cmds.push(Cmd::Suspect { addr, t, suspect, offset_m, nis });
         }
     }
 
