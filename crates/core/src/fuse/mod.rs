@@ -473,9 +473,10 @@ impl Fuser {
             persistent: g.persistent.clone(),
             unheard: g.unheard.clone(),
         };
-        if !a.fused.has_position() {
+        if !a.fused.has_position() || self.sparse_mirrored(g) {
             return self.sparse_tdoa(g, now, out);
         }
+        let Some(a) = self.aircraft.get_mut(&g.addr) else { return };
         if a.sparse.take().is_some() {
             self.stats.sparse.handed_over += 1;
             self.sparse_active -= 1;

@@ -128,6 +128,9 @@ pub struct SparseStats {
     /// Tracks taken over from a cloud that the time differences then kept
     /// missing: dropped for a new cloud.
     pub given_back: u64,
+    /// Tracks taken over from a cloud for which a transmission had another
+    /// solution that who heard it did not rule out: dropped for a new cloud.
+    pub mirrored: u64,
     /// Aircraft not given a filter: as many as `max_filters` were running.
     pub refused: u64,
 }
@@ -162,7 +165,7 @@ impl std::fmt::Display for FuseStats {
             write!(
                 f,
                 "; sparse geometry: {} particle filters ({} refused, table full), {} updates, {} restarts, \
-                 {} published, {} handed over at a fix, {} at one mode ({} given back), {} groups without a height",
+                 {} published, {} handed over at a fix, {} at one mode ({} given back, {} for a mirror), {} groups without a height",
                 s.started,
                 s.refused,
                 s.updates,
@@ -171,6 +174,7 @@ impl std::fmt::Display for FuseStats {
                 s.handed_over,
                 s.handed_over_one_mode,
                 s.given_back,
+                s.mirrored,
                 s.no_height
             )?;
         }

@@ -7,14 +7,16 @@
 //! differences from then on (an unscented update, which one mode and a few
 //! kilometres of spread allow) and are published flagged `sparse` until the
 //! first fix. Tracks the time differences keep missing were started from a
-//! wrong cloud: they are dropped and a new cloud starts.
+//! wrong cloud, and tracks a transmission gives a second solution nothing
+//! rules out may be on the wrong one of two: either way they are dropped
+//! and a new cloud starts.
 
 use super::{Fuser, Output, TrackReport};
 use crate::fuse::TrackSource;
 use crate::mlat::engine::TdoaGroup;
 use crate::track::measurement::{Measurement, Observation, Outcome, Source};
 use crate::track::motion::Motion;
-use crate::track::particle::{SparseOutcome, SparseTrack};
+use crate::track::particle::{mirrors, SparseOutcome, SparseTrack};
 use crate::track::Estimate;
 
 /// A height older than this does not place the aircraft on its surface (s).
@@ -128,23 +130,55 @@ impl Fuser {
             (Observation::Tdoa { .. }, Outcome::Gated) => {
                 a.sparse_gated += 1;
                 if a.sparse_gated >= self.tcfg.max_gated_in_a_row {
-                    (a.fused, a.single) =
-                        super::fresh_tracks(&self.tcfg, &self.spec_mlat_only, self.cfg.method);
-                    a.sparse_geometry = false;
-                    a.sparse_publishable = 0;
-                    a.sparse_gated = 0;
-                    // A new cloud from the next time differences, at once.
-                    a.sparse_since = Some(f64::NEG_INFINITY);
+                    self.give_back(addr, "the time differences kept missing them");
                     self.stats.sparse.given_back += 1;
-                    tracing::info!(
-                        hex = format!("{addr:06X}"),
-                        "tracks started from a particle cloud lost the aircraft: a new cloud starts"
-                    );
                     return true;
                 }
             }
             _ => {}
         }
         false
+    }
+}
+
+impl Fuser {
+    /// Whether a transmission with two time differences has a solution far
+    /// from the aircraft's tracks started from a cloud (no fix yet) that who
+    /// heard it does not rule out. The tracks may then be on either (near
+    /// a line through its receivers the two solutions part, and a track
+    /// follows one or the other as well), and one Gaussian cannot say so:
+    /// the aircraft goes back to a cloud, which can hold both. One time
+    /// difference's far solutions are its curve's, which the tracks' own
+    /// history rules out.
+    pub(super) fn sparse_mirrored(&mut self, g: &TdoaGroup) -> bool {
+        let Some(a) = self.aircraft.get(&g.addr) else { return false };
+        if !a.sparse_geometry || g.sites.len() != 3 {
+            return false;
+        }
+        let height = a.height.filter(|&(_, t)| (g.t - t).abs() <= HEIGHT_MAX_AGE_S);
+        let (Some((h, _)), Some(est)) = (height, a.fused.estimate_at(g.t)) else { return false };
+        let position =
+            (est.state.x.fixed_rows::<2>(0).into_owned(), est.state.p.fixed_view::<2, 2>(0, 0).into_owned());
+        // With no solution near the tracks they are off, not on a mirror:
+        // the gate sees to that.
+        let m = mirrors(&est.plane, &g.sites, h, g.unheard.as_ref(), g.t, position);
+        if !(m.own && m.open) {
+            return false;
+        }
+        self.give_back(g.addr, "a transmission had another solution who heard it could not rule out");
+        self.stats.sparse.mirrored += 1;
+        true
+    }
+
+    /// Drops the tracks an aircraft's cloud started, for a new cloud from
+    /// its next time differences, at once; logged with `why`.
+    fn give_back(&mut self, addr: u32, why: &str) {
+        let Some(a) = self.aircraft.get_mut(&addr) else { return };
+        (a.fused, a.single) = super::fresh_tracks(&self.tcfg, &self.spec_mlat_only, self.cfg.method);
+        a.sparse_geometry = false;
+        a.sparse_publishable = 0;
+        a.sparse_gated = 0;
+        a.sparse_since = Some(f64::NEG_INFINITY);
+        tracing::info!(hex = format!("{addr:06X}"), "tracks started from a particle cloud given back: {why}");
     }
 }

@@ -332,10 +332,22 @@ fn tdoa(addr: u32, t: f64) -> crate::mlat::engine::TdoaGroup {
     tdoa_from(addr, t, at(t))
 }
 
-/// Time differences at `t` of an aircraft at `(lat, lon, h)`.
-fn tdoa_from(addr: u32, t: f64, (lat, lon, h): (f64, f64, f64)) -> crate::mlat::engine::TdoaGroup {
+/// Time differences at `t` of an aircraft at `(lat, lon, h)`, from three
+/// sites around the flight's middle.
+fn tdoa_from(addr: u32, t: f64, at: (f64, f64, f64)) -> crate::mlat::engine::TdoaGroup {
+    tdoa_at_sites(addr, t, at, [[0.0, 30_000.0], [26_000.0, -15_000.0], [-26_000.0, -15_000.0]])
+}
+
+/// Time differences at `t` of an aircraft at `(lat, lon, h)`, from sites
+/// east and north (m) of the flight's middle.
+fn tdoa_at_sites(
+    addr: u32,
+    t: f64,
+    (lat, lon, h): (f64, f64, f64),
+    sites: [[f64; 2]; 3],
+) -> crate::mlat::engine::TdoaGroup {
     let p = crate::geo::geodetic_to_ecef(lat, lon, h);
-    let sites = [[0.0, 30_000.0], [26_000.0, -15_000.0], [-26_000.0, -15_000.0]].map(|[e, n]| {
+    let sites = sites.map(|[e, n]| {
         let (la, lo, ha) = crate::geo::displace(45.0, 5.0, 100.0, [e, n, 0.0]);
         let s = crate::geo::geodetic_to_ecef(la, lo, ha);
         (s, t + crate::geo::ecef_distance(p, s) / crate::mlat::solver::C_AIR, 50e-9)
@@ -399,7 +411,7 @@ fn a_one_peaked_cloud_hands_over_and_a_wrong_start_is_given_back() {
         t += 0.5;
     }
     let s = f.stats().sparse;
-    assert_eq!((s.handed_over_one_mode, s.given_back), (1, 0), "{s:?}");
+    assert_eq!((s.handed_over_one_mode, s.given_back, s.mirrored), (1, 0, 0), "{s:?}");
     let sparse_tracks = |out: &[Output]| -> Vec<(f64, f64)> {
         (out.iter())
             .filter_map(|o| match o {
@@ -437,7 +449,49 @@ fn a_one_peaked_cloud_hands_over_and_a_wrong_start_is_given_back() {
         f.on_tdoa(&tdoa_from(2, t, at(t + 150.0)), t, &mut out);
         t += 0.5;
     }
-    assert_eq!(f.stats().sparse.given_back, 1, "{:?}", f.stats().sparse);
+    let s = f.stats().sparse;
+    assert_eq!((s.given_back, s.mirrored), (1, 0), "{s:?}");
+}
+
+/// Tracks started from a cloud, then heard by three receivers in a line: a
+/// transmission's second solution, mirrored across the line, that nothing
+/// rules out (no coverage known) sends the aircraft back to a cloud, and
+/// nothing is published while the two cannot be told apart.
+#[test]
+fn a_mirror_nothing_rules_out_gives_tracks_from_a_cloud_back() {
+    let mut tcfg = TrackConfig::default();
+    tcfg.sparse.enabled = true;
+    tcfg.sparse.start_after_s = 1.0;
+    let mut f = Fuser::new(FuseConfig::default(), tcfg, false);
+    let height =
+        |t| Measurement { t, source: Source::Mlat, obs: Observation::Height { h: 3000.0, var: 100.0 } };
+    let (mut t, mut out) = (99.0, Vec::new());
+    while f.stats().sparse.handed_over_one_mode < 1 && t < 140.0 {
+        f.on_measurement(1, None, height(t), t, &mut out);
+        f.on_tdoa(&tdoa(1, t), t, &mut out);
+        t += 0.5;
+    }
+    assert_eq!(f.stats().sparse.handed_over_one_mode, 1);
+    // Sites on a north-south line 40 km west of the flight's middle.
+    let line = [[-40_000.0, 60_000.0], [-40_000.0, 0.0], [-40_000.0, -60_000.0]];
+    out.clear();
+    let until = t + 20.0;
+    while t < until {
+        f.on_measurement(1, None, height(t), t, &mut out);
+        f.on_tdoa(&tdoa_at_sites(1, t, at(t), line), t, &mut out);
+        f.advance(t, &mut out);
+        t += 0.5;
+    }
+    let s = f.stats().sparse;
+    assert_eq!((s.mirrored, s.given_back), (1, 0), "{s:?}");
+    let published_after: Vec<f64> = (out.iter())
+        .filter_map(|o| match o {
+            Output::Track(r) if r.sparse => Some(r.est.t),
+            _ => None,
+        })
+        .collect();
+    // At most the estimate of the first line transmission's moment, before it was judged.
+    assert!(published_after.len() <= 1, "{published_after:?}");
 }
 
 /// A cluster's checkpoint reserves track numbers: an aircraft whose track

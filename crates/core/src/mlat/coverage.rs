@@ -65,10 +65,12 @@ const PRIOR_OFFERED: f32 = 4.0;
 const MAX_DETECT: f32 = 0.9;
 /// A hearing counts only beyond this many rings past the reach (a reach
 /// from a few dozen aircraft falls short of the true one), where the
-/// receiver missed at least `BEYOND_MISSES` transmissions (nothing flying
-/// there is no evidence)...
+/// receiver missed at least `BEYOND_MISSES` transmissions in the first
+/// `BEYOND_EVIDENCE_RINGS` rings of it (nothing flying there is no
+/// evidence)...
 const BEYOND_MARGIN: usize = 1;
 const BEYOND_MISSES: f32 = 30.0;
+const BEYOND_EVIDENCE_RINGS: usize = 2;
 /// ...as this share heard: an aircraft heard further than its kind usually
 /// is (a strong transponder, a duct) is rare, not impossible.
 const MIN_DETECT: f32 = 0.02;
@@ -133,18 +135,27 @@ impl Sector {
         (n >= FALLBACK_SECTORS && inside >= MISS_EVIDENCE).then_some((k, inside))
     }
 
-    fn of(heard: &[f32; RINGS], offered: &[f32; RINGS]) -> Sector {
+    /// One sector's counts; `heard_within` is how many rings out the
+    /// receiver heard anything in any sector of the band (None before it
+    /// heard anything): misses further out than any hearing, at the far
+    /// end of the network's traffic, say nothing of this sector.
+    fn of(heard: &[f32; RINGS], offered: &[f32; RINGS], heard_within: Option<usize>) -> Sector {
         let total: f32 = heard.iter().sum();
-        let offered_all: f32 = offered.iter().sum();
+        let misses = |rings: std::ops::Range<usize>| -> f32 {
+            let rings = rings.start.min(RINGS)..rings.end.min(RINGS);
+            (offered[rings.clone()].iter().sum::<f32>() - heard[rings].iter().sum::<f32>()).max(0.0)
+        };
         if total < SECTOR_HEARD {
             // A deaf sector (an antenna blocked that way) once it missed
-            // enough; else nothing known.
-            let deaf = offered_all - total >= DEAF_MISSES && total < DEAF_SHARE * offered_all;
-            let misses = offered_all - total;
-            return Sector {
-                reach: deaf.then_some(0),
-                inside: 0.0,
-                misses_beyond: if deaf { misses } else { 0.0 },
+            // enough where it hears in other directions; else nothing known.
+            let Some(within) = heard_within else { return Sector::UNKNOWN };
+            let offered_within: f32 = offered[..within.min(RINGS)].iter().sum();
+            let missed = misses(0..within);
+            let deaf = missed >= DEAF_MISSES && total < DEAF_SHARE * offered_within;
+            return if deaf {
+                Sector { reach: Some(0), inside: 0.0, misses_beyond: missed }
+            } else {
+                Sector::UNKNOWN
             };
         }
         let mut acc = 0.0;
@@ -157,9 +168,15 @@ impl Sector {
         // Its share over the whole reach: where few fly near it (a network
         // whose traffic passes at its edge) the inner rings say little.
         let (h, o): (f32, f32) = (heard[..k].iter().sum(), offered[..k].iter().sum());
-        let misses_beyond = (k..RINGS).map(|r| offered[r] - heard[r]).sum();
+        // What it missed where a hearing starts to count as beyond its
+        // reach: misses far past it (aircraft at the network's other end)
+        // say nothing of how far it hears.
+        let far = k + 1 + BEYOND_MARGIN;
+        let misses_beyond = misses(far..far + BEYOND_EVIDENCE_RINGS);
         Sector { reach: Some(k), inside: h / (o + PRIOR_OFFERED), misses_beyond }
     }
+
+    const UNKNOWN: Sector = Sector { reach: None, inside: 0.0, misses_beyond: 0.0 };
 }
 
 /// A receiver's place and axes, and when it last sent anything (server s).
@@ -221,9 +238,10 @@ impl RxCoverage {
         let zero = [[[0.0; RINGS]; SECTORS]; BANDS];
         let (mut miss_cost, mut heard_cost, mut reach_m) = (zero, zero, [0.0; BANDS]);
         for b in 0..BANDS {
-            let beyond = Self::beyond_ring(&heard[b]);
+            let heard_within = Self::heard_within(&heard[b]);
+            let beyond = Self::beyond_ring(&heard[b], heard_within);
             let sectors: [Sector; SECTORS] =
-                std::array::from_fn(|s| Sector::of(&heard[b][s], &offered[b][s]));
+                std::array::from_fn(|s| Sector::of(&heard[b][s], &offered[b][s], heard_within));
             let fallback = Sector::fallback(&sectors);
             for (s, sector) in sectors.iter().enumerate() {
                 for (r, cost) in heard_cost[b][s].iter_mut().enumerate() {
@@ -247,12 +265,16 @@ impl RxCoverage {
         RxCoverage { ecef, lat, lon, last_heard, miss_cost, heard_cost, reach_m }
     }
 
+    /// How many rings out it heard anything, in any sector.
+    fn heard_within(heard: &[[f32; RINGS]; SECTORS]) -> Option<usize> {
+        (0..RINGS).rev().find(|&r| heard.iter().any(|s| s[r] > 0.0)).map(|r| r + 1)
+    }
+
     /// The first ring taken as beyond reach in every sector: a few past the
     /// furthest it heard anything in, once it heard enough to say.
-    fn beyond_ring(heard: &[[f32; RINGS]; SECTORS]) -> Option<usize> {
+    fn beyond_ring(heard: &[[f32; RINGS]; SECTORS], heard_within: Option<usize>) -> Option<usize> {
         let total: f32 = heard.iter().flatten().sum();
-        let furthest = (0..RINGS).rev().find(|&r| heard.iter().any(|s| s[r] > 0.0))?;
-        (total >= BEYOND_AFTER_HEARD).then_some(furthest + 1 + BEYOND_RINGS)
+        heard_within.filter(|_| total >= BEYOND_AFTER_HEARD).map(|k| k + BEYOND_RINGS)
     }
 
     /// The cost (chi-square units) of its missing a transmission from an
@@ -472,6 +494,44 @@ mod tests {
         // The other receiver was never listening: nothing learnt of it.
         assert_eq!(s.rxs[1].reach_m, [0.0; BANDS]);
         assert!(!s.rxs[1].listening(now));
+    }
+
+    /// A sector that heard few aircraft yet, but missed many far beyond
+    /// where the receiver hears in any direction (the network's other end),
+    /// is not taken for deaf: only misses where it could hear say so.
+    #[test]
+    fn misses_beyond_any_hearing_do_not_make_a_sector_deaf() {
+        let plane = Plane::new(48.0, 8.0, 0.0);
+        let mut c = Coverage::enabled();
+        c.add_receiver(48.0, 8.0, 200.0);
+        let mut k = 0u32;
+        let mut offer = |c: &mut Coverage, bearing_deg: f64, range_m: f64| {
+            k += 1;
+            let now = k as f64 * 0.01;
+            c.note_heard(0, now);
+            let b = bearing_deg.to_radians();
+            let (lat, lon) = plane.to_geodetic(range_m * b.sin(), range_m * b.cos());
+            let heard = (0.0..180.0).contains(&bearing_deg) && range_m < 100_000.0;
+            let rxs: &[usize] = if heard { &[0] } else { &[] };
+            c.observe(k, geodetic_to_ecef(lat, lon, 10_000.0), rxs.iter().copied(), now);
+        };
+        for j in 0..2000 {
+            let f = |x: f64| (j as f64 * x).fract();
+            // Everywhere but the first sector: its east hears within 100 km, its west nothing.
+            offer(&mut c, 45.0 + 315.0 * f(0.618_034), 5_000.0 + 295_000.0 * f(0.414_213));
+        }
+        for j in 0..300 {
+            // The first sector: a few near (heard), many far beyond any hearing.
+            let near = j % 30 == 0;
+            let range = if near { 20_000.0 + 700.0 * j as f64 } else { 300_000.0 + 800.0 * j as f64 };
+            offer(&mut c, 20.0, range);
+        }
+        let rx = &c.snapshot(1e6).rxs[0];
+        let high = band(10_000.0);
+        // Heard 50 km out in the first sector: nothing against it.
+        assert_eq!(rx.heard_cost_at(high, 10_000.0, 50_000.0), 0.0);
+        // The west, which missed everything within the east's reach, is deaf.
+        assert!(rx.heard_cost_at(high, -50_000.0, 10_000.0) > 5.0);
     }
 
     /// One aircraft's transmissions count once every few seconds.

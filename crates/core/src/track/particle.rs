@@ -456,24 +456,56 @@ impl SparseTrack {
     }
 
     /// Whether the newest transmission has a solution far outside the
-    /// cloud that who heard it does not rule out (see [`MIRROR_EVIDENCE`]).
+    /// cloud that who heard it does not rule out.
     fn mirror_open(&self, mean: &Vector4<f64>, cov: &Matrix4<f64>) -> bool {
         let Some(last) = &self.last else { return false };
-        let Some(d) = Differences::new(&self.plane, &last.sites, last.h) else { return false };
-        let Some(info) = cov.fixed_view::<2, 2>(0, 0).into_owned().try_inverse() else { return true };
-        let all = ([f64::NEG_INFINITY; 2], [f64::INFINITY; 2]);
-        let hearing =
-            last.unheard.as_ref().map(|u| Hearing::new(&self.plane, u, self.t, last.h, all.0, all.1));
-        let cost = |e: f64, n: f64| hearing.as_ref().map_or(0.0, |h| h.cost(e, n));
-        let here = cost(mean[0], mean[1]);
-        // Named: the search borrows `d`, which its value as the tail would outlive.
-        let open = surface::solutions(&d, &self.plane, last.h).any(|(e, n)| {
-            let x = nalgebra::Vector2::new(e - mean[0], n - mean[1]);
-            let apart = (x.transpose() * info * x)[0] > 25.0 && x.norm() > 1_000.0;
-            apart && cost(e, n) - here < MIRROR_EVIDENCE
-        });
-        open
+        let position = (nalgebra::Vector2::new(mean[0], mean[1]), cov.fixed_view::<2, 2>(0, 0).into_owned());
+        mirrors(&self.plane, &last.sites, last.h, last.unheard.as_ref(), self.t, position).open
     }
+}
+
+/// What one transmission's time differences say of an estimate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Mirrors {
+    /// A solution lies within the estimate.
+    pub own: bool,
+    /// A solution lies far outside it, and who heard the transmission
+    /// does not rule it out (see [`MIRROR_EVIDENCE`]).
+    pub open: bool,
+}
+
+/// The solutions of one transmission's time differences (`sites`, an
+/// aircraft at height `h`, heard at `t` by those `unheard` says) against
+/// an estimate (`position`: mean and covariance in `plane`): with a
+/// solution far outside it that nothing rules out, the estimate may be
+/// either, and is not worth publishing.
+pub fn mirrors(
+    plane: &Plane,
+    sites: Sites,
+    h: f64,
+    unheard: Option<&Unheard>,
+    t: f64,
+    (mean, cov): (nalgebra::Vector2<f64>, nalgebra::Matrix2<f64>),
+) -> Mirrors {
+    let mut m = Mirrors { own: false, open: false };
+    let Some(d) = Differences::new(plane, sites, h) else { return m };
+    let Some(info) = cov.try_inverse() else { return Mirrors { own: false, open: true } };
+    let all = ([f64::NEG_INFINITY; 2], [f64::INFINITY; 2]);
+    let hearing = unheard.map(|u| Hearing::new(plane, u, t, h, all.0, all.1));
+    let cost = |e: f64, n: f64| hearing.as_ref().map_or(0.0, |h| h.cost(e, n));
+    let here = cost(mean[0], mean[1]);
+    for (e, n) in surface::solutions(&d, plane, h) {
+        let x = nalgebra::Vector2::new(e - mean[0], n - mean[1]);
+        if (x.transpose() * info * x)[0] > 25.0 && x.norm() > 1_000.0 {
+            m.open |= cost(e, n) - here < MIRROR_EVIDENCE;
+        } else {
+            m.own = true;
+        }
+        if m.own && m.open {
+            break;
+        }
+    }
+    m
 }
 
 /// Mean and covariance of [e, n, ve, vn] as the trackers' six-state Gaussian.
