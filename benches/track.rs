@@ -107,7 +107,7 @@ fn bench(c: &mut Criterion) {
     g.finish();
 
     // The particle filter of an aircraft heard by too few receivers: one
-    // update (move, weigh, resample when due) of its default 2,000 particles
+    // update (move, weigh, resample when due) of its default 1,000 particles
     // by the same three sites' time differences.
     use fuse1090::track::particle::{SparseConfig, SparseTrack};
     let pcfg = SparseConfig::default();
@@ -118,7 +118,7 @@ fn bench(c: &mut Criterion) {
     };
     let mut g = c.benchmark_group("particle");
     g.throughput(Throughput::Elements(100));
-    g.bench_function("update_2000_particles", |b| {
+    g.bench_function("update_1000_particles", |b| {
         b.iter_batched(
             || SparseTrack::start(&pcfg, &toas(0.0), None, 0.0, 9000.0, 1).expect("placed"),
             |mut s| {

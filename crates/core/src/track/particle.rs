@@ -47,7 +47,7 @@ use surface::{pull, Differences};
 #[serde(default, deny_unknown_fields)]
 pub struct SparseConfig {
     /// Track aircraft heard by too few receivers for a fix with particles
-    /// (off by default).
+    /// (on by default; off, the receivers' coverage is not learnt either).
     pub enabled: bool,
     pub particles: usize,
     /// Resample when the effective sample size falls below this share of the particles.
@@ -62,7 +62,7 @@ pub struct SparseConfig {
     /// Published only once the cloud's position is this tight (m, 1 sigma,
     /// largest axis) and has one mode.
     pub publish_sigma_m: f64,
-    /// Most filters running at once (each holds its particles: 80 kB at 2,000);
+    /// Most filters running at once (each holds its particles: 40 kB at 1,000);
     /// aircraft beyond are refused and counted.
     pub max_filters: usize,
     /// An aircraft gets a filter once its groups have been too small for a
@@ -84,10 +84,8 @@ pub struct SparseConfig {
 impl Default for SparseConfig {
     fn default() -> Self {
         SparseConfig {
-            // Off until the time differences' noise is right on counter-timed
-            // networks (docs/tracking.md).
-            enabled: false,
-            particles: 2000,
+            enabled: true,
+            particles: 1000,
             resample_below: 0.5,
             accel_ms2: 1.0,
             speed_ms: [60.0, 300.0],

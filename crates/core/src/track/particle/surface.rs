@@ -12,8 +12,11 @@ use super::Sites;
 use crate::mlat::solver::C_AIR;
 use crate::track::plane::Plane;
 
-/// Gauss-Newton steps pulling a drawn point onto a measurement's surface.
+/// Gauss-Newton steps pulling a drawn point onto a measurement's surface,
+/// at most; it stops once a step is shorter than `PULL_CONVERGED_M` (m),
+/// far below the time differences' noise.
 const PULL_STEPS: usize = 12;
+const PULL_CONVERGED_M: f64 = 0.01;
 
 /// The time differences in metres, and their covariance's inverse, for sites
 /// taken relative to the first; and how far each site can see an aircraft
@@ -121,6 +124,10 @@ pub(super) fn pull(
         };
         e -= step[0];
         n -= step[1];
+        // Converged: further steps would move it by less than this.
+        if step[0].abs() + step[1].abs() < PULL_CONVERGED_M {
+            break;
+        }
     }
     (d.visible(plane, e, n, h) && d.chi2(d.residual(plane, e, n, h)) <= 9.0).then_some((e, n))
 }
