@@ -298,9 +298,7 @@ fn a_release_longer_than_the_reorder_window_still_publishes() {
         f.on_measurement(1, None, fix(burst), burst, &mut out);
         for k in 1..=10 {
             let t = burst + 0.5 * k as f64;
-            let height =
-                Measurement { t, source: Source::Mlat, obs: Observation::Height { h: 3000.0, var: 100.0 } };
-            f.on_measurement(1, None, height, burst, &mut out);
+            f.on_measurement(1, None, height(t), burst, &mut out);
         }
         assert!(out.is_empty(), "held");
         f.finish(&mut out);
@@ -372,8 +370,6 @@ fn particle_filters_are_bounded_and_give_way_to_a_fix() {
     tcfg.sparse.handover_after = 0;
     let mut f = Fuser::new(FuseConfig::default(), tcfg, false);
     let mut out = Vec::new();
-    let height =
-        |t| Measurement { t, source: Source::Mlat, obs: Observation::Height { h: 3000.0, var: 100.0 } };
     for t in [99.0, 100.0, 101.0, 102.0] {
         for addr in [1, 2] {
             f.on_measurement(addr, None, height(t), t, &mut out);
@@ -390,19 +386,39 @@ fn particle_filters_are_bounded_and_give_way_to_a_fix() {
     assert_eq!((s.handed_over, s.started), (1, 2), "{s:?}");
 }
 
+/// A fuser whose particle filters start after 1 s of groups too small for a fix.
+fn sparse_fuser() -> Fuser {
+    let mut tcfg = TrackConfig::default();
+    tcfg.sparse.enabled = true;
+    tcfg.sparse.start_after_s = 1.0;
+    Fuser::new(FuseConfig::default(), tcfg, false)
+}
+
+/// The test flight's reported height at `t`.
+fn height(t: f64) -> Measurement {
+    Measurement { t, source: Source::Mlat, obs: Observation::Height { h: 3000.0, var: 100.0 } }
+}
+
+/// Feeds aircraft `addr`'s heights and time differences from `t` until its
+/// cloud is the `n`th handed to Gaussian tracks; returns the time reached.
+fn until_handed_over(f: &mut Fuser, addr: u32, n: u64, mut t: f64, out: &mut Vec<Output>) -> f64 {
+    while f.stats().sparse.handed_over_one_mode < n && t < 140.0 {
+        f.on_measurement(addr, None, height(t), t, out);
+        f.on_tdoa(&tdoa(addr, t), t, out);
+        t += 0.5;
+    }
+    assert_eq!(f.stats().sparse.handed_over_one_mode, n);
+    t
+}
+
 /// A cloud with one mode for three estimates in a row: the Gaussian tracks
 /// start from it, take the time differences, are confirmed by them and
 /// published flagged `sparse`, until a fix; time differences that keep
 /// missing a track started from a cloud send the aircraft back to a new one.
 #[test]
 fn a_one_peaked_cloud_hands_over_and_a_wrong_start_is_given_back() {
-    let mut tcfg = TrackConfig::default();
-    tcfg.sparse.enabled = true;
-    tcfg.sparse.start_after_s = 1.0;
-    let mut f = Fuser::new(FuseConfig::default(), tcfg, false);
+    let mut f = sparse_fuser();
     let mut out = Vec::new();
-    let height =
-        |t| Measurement { t, source: Source::Mlat, obs: Observation::Height { h: 3000.0, var: 100.0 } };
     let mut t = 99.0;
     while t < 130.0 {
         f.on_measurement(1, None, height(t), t, &mut out);
@@ -437,13 +453,8 @@ fn a_one_peaked_cloud_hands_over_and_a_wrong_start_is_given_back() {
 
     // Aircraft 2 is handed over, then its time differences jump 30 km away
     // (as if the cloud had taken the wrong side): given back.
-    let (mut t, mut out) = (99.0, Vec::new());
-    while f.stats().sparse.handed_over_one_mode < 2 && t < 140.0 {
-        f.on_measurement(2, None, height(t), t, &mut out);
-        f.on_tdoa(&tdoa(2, t), t, &mut out);
-        t += 0.5;
-    }
-    assert_eq!(f.stats().sparse.handed_over_one_mode, 2);
+    let mut out = Vec::new();
+    let mut t = until_handed_over(&mut f, 2, 2, 99.0, &mut out);
     for _ in 0..20 {
         f.on_measurement(2, None, height(t), t, &mut out);
         f.on_tdoa(&tdoa_from(2, t, at(t + 150.0)), t, &mut out);
@@ -459,19 +470,9 @@ fn a_one_peaked_cloud_hands_over_and_a_wrong_start_is_given_back() {
 /// nothing is published while the two cannot be told apart.
 #[test]
 fn a_mirror_nothing_rules_out_gives_tracks_from_a_cloud_back() {
-    let mut tcfg = TrackConfig::default();
-    tcfg.sparse.enabled = true;
-    tcfg.sparse.start_after_s = 1.0;
-    let mut f = Fuser::new(FuseConfig::default(), tcfg, false);
-    let height =
-        |t| Measurement { t, source: Source::Mlat, obs: Observation::Height { h: 3000.0, var: 100.0 } };
-    let (mut t, mut out) = (99.0, Vec::new());
-    while f.stats().sparse.handed_over_one_mode < 1 && t < 140.0 {
-        f.on_measurement(1, None, height(t), t, &mut out);
-        f.on_tdoa(&tdoa(1, t), t, &mut out);
-        t += 0.5;
-    }
-    assert_eq!(f.stats().sparse.handed_over_one_mode, 1);
+    let mut f = sparse_fuser();
+    let mut out = Vec::new();
+    let mut t = until_handed_over(&mut f, 1, 1, 99.0, &mut out);
     // Sites on a north-south line 40 km west of the flight's middle.
     let line = [[-40_000.0, 60_000.0], [-40_000.0, 0.0], [-40_000.0, -60_000.0]];
     out.clear();

@@ -51,7 +51,8 @@ const CELL_MEMORY: f32 = 200.0;
 const SECTOR_HEARD: f32 = 30.0;
 const REACH_SHARE: f32 = 0.98;
 /// A sector is deaf (reach 0) once a receiver missed at least
-/// `DEAF_MISSES` there and heard less than `DEAF_SHARE` of what flew there.
+/// `DEAF_MISSES` there and heard less than `DEAF_SHARE` of what flew there,
+/// both counted within the furthest it hears in any direction.
 const DEAF_SHARE: f32 = 0.05;
 const DEAF_MISSES: f32 = 20.0;
 /// A miss counts inside the reach (less its last ring, where the reach
