@@ -378,9 +378,9 @@ fn particle_filters_are_bounded_and_give_way_to_a_fix() {
     }
     let s = f.stats().sparse;
     assert_eq!((s.started, s.updates, s.refused), (1, 2, 3), "{s:?}");
-    // A fix gives aircraft 1 a track: its filter goes, and aircraft 2 may have one.
+    // A fix gives aircraft 1 a track: its filter goes at once (no more time
+    // differences need come), and aircraft 2 may have one.
     f.on_measurement(1, None, fix(103.0), 103.0, &mut out);
-    f.on_tdoa(&tdoa(1, 103.5), 103.5, &mut out);
     f.on_tdoa(&tdoa(2, 103.5), 103.5, &mut out);
     let s = f.stats().sparse;
     assert_eq!((s.handed_over, s.started), (1, 2), "{s:?}");

@@ -64,6 +64,13 @@ impl Fuser {
             return;
         }
         let Some(a) = self.aircraft.get_mut(&addr) else { return };
+        // Placed by a position (a fix, ADS-B), the aircraft needs its cloud no
+        // more: freed now, not at its next time differences, which an
+        // aircraft heard by enough receivers may never send.
+        if a.fused.has_position() && a.sparse.take().is_some() {
+            self.stats.sparse.handed_over += 1;
+            self.sparse_active -= 1;
+        }
         if !matches!(m.obs, Observation::Position { .. } | Observation::Tdoa { .. }) {
             return;
         }
