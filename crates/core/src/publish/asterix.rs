@@ -62,6 +62,23 @@ fn sat_u8(v: f64) -> u8 {
     v.round().clamp(0.0, 255.0) as u8
 }
 
+/// I062/080's four octets for a track fed by ADS-B and/or MLAT, its height
+/// known or not. An estimate from too few receivers for a fix (`sparse`,
+/// a particle cloud or the track it started) is sent as a tentative track
+/// (CNF): CAT062 has no bit for it, and a consumer should not take it for
+/// a confirmed one; its kilometres of uncertainty are in I062/500.
+fn track_status(adsb: bool, mlat: bool, alt_known: bool, sparse: bool) -> [u8; 4] {
+    let src_alt: u8 = match (alt_known, adsb) {
+        (false, _) => 0,
+        (true, true) => 1,  // GNSS (ADS-B geometric or corrected baro)
+        (true, false) => 7, // multilateration
+    };
+    let mono = (adsb != mlat) as u8;
+    let o1 = (mono << 7) | (src_alt << 2) | ((sparse as u8) << 1) | 1;
+    let o4 = (1 << 6) | (1 << 5) | ((!mlat as u8) << 4) | ((!adsb as u8) << 3);
+    [o1, 1, 1, o4]
+}
+
 /// One CAT062 record (FSPEC and items) for a track.
 pub fn record(src: Source, r: &TrackReport, ages: [Option<f64>; 2]) -> Vec<u8> {
     let e = &r.est;
@@ -84,17 +101,11 @@ pub fn record(src: Source, r: &TrackReport, ages: [Option<f64>; 2]) -> Vec<u8> {
     }
     items.push((11, i380));
     items.push((12, ((r.id & 0xffff) as u16).to_be_bytes().to_vec()));
-    // I062/080, four octets.
     let (adsb_age, mlat_age) = (ages[0], ages[1]);
-    let src_alt: u8 = match (e.alt_m.is_some(), adsb_age.is_some()) {
-        (false, _) => 0,
-        (true, true) => 1,  // GNSS (ADS-B geometric or corrected baro)
-        (true, false) => 7, // multilateration
-    };
-    let mono = (adsb_age.is_some() != mlat_age.is_some()) as u8;
-    let o1 = (mono << 7) | (src_alt << 2) | 1;
-    let o4 = (1 << 6) | (1 << 5) | ((mlat_age.is_none() as u8) << 4) | ((adsb_age.is_none() as u8) << 3);
-    items.push((13, vec![o1, 1, 1, o4]));
+    items.push((
+        13,
+        track_status(adsb_age.is_some(), mlat_age.is_some(), e.alt_m.is_some(), r.sparse).to_vec(),
+    ));
     // I062/290: ES and MLT ages (1/4 s), only what was received.
     let mut i290 = vec![0u8, 0u8];
     let mut ages_bytes = Vec::new();
@@ -201,5 +212,10 @@ mod tests {
         assert_eq!(blocks.len(), 2);
         assert_eq!(u16::from_be_bytes([blocks[0][1], blocks[0][2]]) as usize, blocks[0].len());
         assert_eq!(blocks[0][0], 62);
+        // I062/080: MON for one technology, SRC, CNF only for a sparse
+        // estimate, and the per-technology "no detection" bits of octet 4.
+        assert_eq!(track_status(true, true, true, false), [0b0000_0101, 1, 1, 0b0110_0000]);
+        assert_eq!(track_status(false, true, true, true), [0b1001_1111, 1, 1, 0b0110_1000]);
+        assert_eq!(track_status(true, false, false, false), [0b1000_0001, 1, 1, 0b0111_0000]);
     }
 }
