@@ -476,11 +476,7 @@ impl Fuser {
         if !a.fused.has_position() || self.sparse_mirrored(g) {
             return self.sparse_tdoa(g, now, out);
         }
-        let Some(a) = self.aircraft.get_mut(&g.addr) else { return };
-        if a.sparse.take().is_some() {
-            self.stats.sparse.handed_over += 1;
-            self.sparse_active -= 1;
-        }
+        self.release_cloud(g.addr);
         let mut sites = [([0.0; 3], 0.0, 0.0); 3];
         for (d, s) in sites.iter_mut().zip(&g.sites) {
             *d = *s;

@@ -121,7 +121,7 @@ pub struct SparseStats {
     /// Groups of an aircraft whose height was not known: not used.
     pub no_height: u64,
     pub published: u64,
-    /// Clouds given up for the aircraft's first fix.
+    /// Clouds given up once a position (a fix, ADS-B) placed the aircraft.
     pub handed_over: u64,
     /// Clouds whose one mode the tracks took over (before any fix).
     pub handed_over_one_mode: u64,

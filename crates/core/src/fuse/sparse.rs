@@ -11,7 +11,7 @@
 //! rules out may be on the wrong one of two: either way they are dropped
 //! and a new cloud starts.
 
-use super::{Fuser, Output, TrackReport};
+use super::{Aircraft, Fuser, Output, TrackReport};
 use crate::fuse::TrackSource;
 use crate::mlat::engine::TdoaGroup;
 use crate::track::measurement::{Measurement, Observation, Outcome, Source};
@@ -22,6 +22,11 @@ use crate::track::Estimate;
 /// A height older than this does not place the aircraft on its surface (s).
 const HEIGHT_MAX_AGE_S: f64 = 30.0;
 
+/// The aircraft's height (m) for a transmission at `t`, if one recent enough is known.
+fn height_at(a: &Aircraft, t: f64) -> Option<f64> {
+    a.height.filter(|&(_, at)| (t - at).abs() <= HEIGHT_MAX_AGE_S).map(|(h, _)| h)
+}
+
 impl Fuser {
     /// One transmission's time differences for an aircraft without a position.
     pub(super) fn sparse_tdoa(&mut self, g: &TdoaGroup, now: f64, out: &mut Vec<Output>) {
@@ -30,7 +35,7 @@ impl Fuser {
         if !cfg.enabled || a.adsb_heard {
             return;
         }
-        let Some((h, _)) = a.height.filter(|&(_, t)| (g.t - t).abs() <= HEIGHT_MAX_AGE_S) else {
+        let Some(h) = height_at(a, g.t) else {
             self.stats.sparse.no_height += 1;
             return;
         };
@@ -155,8 +160,7 @@ impl Fuser {
         if !a.sparse_geometry || g.sites.len() != 3 {
             return false;
         }
-        let height = a.height.filter(|&(_, t)| (g.t - t).abs() <= HEIGHT_MAX_AGE_S);
-        let (Some((h, _)), Some(est)) = (height, a.fused.estimate_at(g.t)) else { return false };
+        let (Some(h), Some(est)) = (height_at(a, g.t), a.fused.estimate_at(g.t)) else { return false };
         let position =
             (est.state.x.fixed_rows::<2>(0).into_owned(), est.state.p.fixed_view::<2, 2>(0, 0).into_owned());
         // With no solution near the tracks they are off, not on a mirror:
@@ -168,6 +172,15 @@ impl Fuser {
         self.give_back(g.addr, "a transmission had another solution who heard it could not rule out");
         self.stats.sparse.mirrored += 1;
         true
+    }
+
+    /// Frees aircraft `addr`'s cloud, if it has one, once a position placed
+    /// it (counted as handed over at a fix).
+    pub(super) fn release_cloud(&mut self, addr: u32) {
+        if self.aircraft.get_mut(&addr).is_some_and(|a| a.sparse.take().is_some()) {
+            self.stats.sparse.handed_over += 1;
+            self.sparse_active -= 1;
+        }
     }
 
     /// Drops the tracks an aircraft's cloud started, for a new cloud from

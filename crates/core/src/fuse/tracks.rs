@@ -58,19 +58,19 @@ impl Fuser {
             Outcome::Restarted => self.stats.restarts += 1,
             _ => {}
         }
+        // Placed by a position (a fix, ADS-B), the aircraft needs its cloud no
+        // more: freed now, not at its next time differences, which an
+        // aircraft heard by enough receivers may never send.
+        let cloud_done = a.sparse.is_some() && a.fused.has_position();
         // Tracks started from a particle cloud and given back to a new one
         // have nothing more to do.
         if a.sparse_geometry && self.sparse_geometry(addr, &m, outcome) {
             return;
         }
-        let Some(a) = self.aircraft.get_mut(&addr) else { return };
-        // Placed by a position (a fix, ADS-B), the aircraft needs its cloud no
-        // more: freed now, not at its next time differences, which an
-        // aircraft heard by enough receivers may never send.
-        if a.fused.has_position() && a.sparse.take().is_some() {
-            self.stats.sparse.handed_over += 1;
-            self.sparse_active -= 1;
+        if cloud_done {
+            self.release_cloud(addr);
         }
+        let Some(a) = self.aircraft.get_mut(&addr) else { return };
         if !matches!(m.obs, Observation::Position { .. } | Observation::Tdoa { .. }) {
             return;
         }

@@ -230,15 +230,10 @@ impl TimingModel {
 
     /// [`TimingModel::learn`] with the residual already judged (`v`, as
     /// [`TimingModel::judge`] gave it with the model's variance and the
-    /// sync's).
-    pub fn learn_judged(&mut self, r: f64, h: f64, v: Verdict) -> f64 {
-        self.learn_shifted(r, h, v, 0.0)
-    }
-
-    /// [`TimingModel::learn_judged`] with the offset stepping towards
-    /// `r + shift` instead of `r`: what the receiver's offset moves in the
-    /// fix is not its copy alone (see [`Residual`]). The copy's own residual
-    /// still teaches the core's variance and the late tail.
+    /// sync's), and the offset stepping towards `r + shift` instead of `r`:
+    /// what the receiver's offset moves in the fix is not its copy alone (see
+    /// [`Residual`]). The copy's own residual still teaches the core's
+    /// variance and the late tail.
     pub fn learn_shifted(&mut self, r: f64, h: f64, v: Verdict, shift: f64) -> f64 {
         let h = h.clamp(0.0, 0.95);
         let d = r / (1.0 - h);
