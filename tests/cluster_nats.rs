@@ -88,11 +88,23 @@ fn start_nats(server: &Path, dir: &Path) -> (Proc, u16) {
 }
 
 /// nats-server on `port`, its JetStream store in `dir` (so that one started
-/// again there has what the first stored).
-fn start_nats_on(server: &Path, dir: &Path, port: u16) -> Proc {
+/// again there has what the first stored), of `max_file_store`.
+///
+/// JetStream reserves each stream's whole bound when it is made, against a
+/// store that by default is three quarters of the disk's free space: the
+/// tests' clusters (1 GiB streams, a few hundred MiB stored) would then
+/// pass or fail with the machine's free disk. The tests that are not about
+/// the store give it a size the reservations fit in.
+fn start_nats_sized(server: &Path, dir: &Path, port: u16, max_file_store: &str) -> Proc {
+    let conf = dir.join("nats.conf");
+    let store = dir.join("js");
+    let text = format!(
+        "listen: \"127.0.0.1:{port}\"\njetstream {{\n  store_dir: {store:?}\n  max_file_store: {max_file_store}\n}}\n"
+    );
+    std::fs::write(&conf, text).unwrap();
     let child = Command::new(server)
-        .args(["-js", "-a", "127.0.0.1", "-p", &port.to_string(), "-sd"])
-        .arg(dir.join("js"))
+        .arg("-c")
+        .arg(&conf)
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
@@ -103,6 +115,11 @@ fn start_nats_on(server: &Path, dir: &Path, port: u16) -> Proc {
         std::thread::sleep(Duration::from_millis(50));
     }
     Proc(child)
+}
+
+/// nats-server on `port` with a store the tests' reservations fit in.
+fn start_nats_on(server: &Path, dir: &Path, port: u16) -> Proc {
+    start_nats_sized(server, dir, port, "64GB")
 }
 
 /// What goes wrong during a cluster run.
@@ -792,6 +809,32 @@ fn fix_against_adsb(path: &Path) -> (f64, usize) {
         .collect();
     d.sort_by(f64::total_cmp);
     (d.get(d.len() / 2).copied().unwrap_or(f64::INFINITY), d.len())
+}
+
+/// A NATS server whose store cannot hold the streams' bounds refuses them:
+/// the operator is told which setting to change, not to enable JetStream,
+/// and the cluster starts once the bound fits.
+#[test]
+fn a_store_too_small_for_the_streams_is_named() {
+    let Some(server) = nats_server() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let port = common::free_port();
+    let _nats = start_nats_sized(&server, dir.path(), port, "256MB");
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    let cfg = |name: &str, max_stream_bytes: i64| fuse1090::cluster::ClusterConfig {
+        url: format!("nats://127.0.0.1:{port}"),
+        name: name.into(),
+        max_stream_bytes,
+        ..Default::default()
+    };
+    let err = rt
+        .block_on(fuse1090::cluster::Nats::connect(&cfg("big", 1 << 30)))
+        .err()
+        .expect("1 GiB streams in 256 MB");
+    let said = format!("{err:#}");
+    assert!(said.contains("max_stream_bytes") && said.contains("max_file_store"), "{said}");
+    assert!(!said.contains("is JetStream enabled"), "{said}");
+    rt.block_on(fuse1090::cluster::Nats::connect(&cfg("small", 32 << 20))).expect("32 MiB streams fit");
 }
 
 /// The receivers' declarations are never aged out (their order numbers the

@@ -403,15 +403,35 @@ async fn stream(
         duplicate_window: Duration::from_secs(120),
         ..Default::default()
     };
-    let mut s = js.get_or_create_stream(cfg.clone()).await.with_context(|| {
-        format!("cannot create the {what} stream (is JetStream enabled: nats-server -js?)")
-    })?;
+    let mut s = js.get_or_create_stream(cfg.clone()).await.map_err(|e| create_error(e, what, max_bytes))?;
     let have = &s.cached_info().config;
     if (have.max_age, have.discard) != (max_age, discard) {
         js.update_stream(&cfg).await.with_context(|| format!("cannot set the {what} stream's limits"))?;
         s = js.get_stream(&cfg.name).await.with_context(|| format!("cannot read the {what} stream"))?;
     }
     Ok(s)
+}
+
+/// Why a stream could not be made, in the operator's terms: JetStream
+/// reserves each stream's whole bound up front, so a server whose store
+/// (by default three quarters of its disk's free space) cannot hold the
+/// bounds refuses the stream, however little is in it yet.
+fn create_error(e: jetstream::context::CreateStreamError, what: &str, max_bytes: i64) -> anyhow::Error {
+    use jetstream::context::CreateStreamErrorKind as Kind;
+    use jetstream::ErrorCode;
+    let storage = matches!(e.kind(), Kind::JetStream(j)
+        if [ErrorCode::STORAGE_RESOURCES_EXCEEDED, ErrorCode::INSUFFICIENT_RESOURCES].contains(&j.error_code()));
+    let why = if storage {
+        format!(
+            "cannot create the {what} stream: the NATS server cannot reserve its {} MiB \
+             (the cluster's streams take three times [cluster] max_stream_bytes and 64 MiB): \
+             lower max_stream_bytes, or give nats-server more store (jetstream max_file_store, free disk)",
+            max_bytes >> 20
+        )
+    } else {
+        format!("cannot create the {what} stream (is JetStream enabled: nats-server -js?)")
+    };
+    anyhow::Error::new(e).context(why)
 }
 
 async fn kv_store(js: &jetstream::Context, cfg: kv::Config) -> Result<kv::Store> {
