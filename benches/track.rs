@@ -94,7 +94,7 @@ fn bench(c: &mut Criterion) {
                     let o = tr.apply(Measurement {
                         t,
                         source: Source::Mlat,
-                        obs: Observation::Tdoa { n: 3, sites },
+                        obs: Observation::Tdoa { n: 3, sites, persistent: Default::default() },
                     });
                     // Applied, not gated: the bench measures the update.
                     assert!(matches!(o, fuse1090::track::Outcome::Applied { .. }), "{o:?}");

@@ -51,7 +51,7 @@ use crate::track::imm::ImmSpec;
 use crate::track::motion::{Fix2, Motion, MotionTest};
 use crate::track::particle::SparseTrack;
 use crate::track::plane::Plane;
-use crate::track::{Estimate, Measurement, Observation, Outcome, Source, Track, TrackConfig};
+use crate::track::{Estimate, Measurement, Observation, Outcome, Persistent, Source, Track, TrackConfig};
 pub use config::FuseConfig;
 pub use conflict::ConflictConfig;
 pub use conformance::ConformanceConfig;
@@ -283,10 +283,16 @@ impl Fuser {
                 Observation::Height { h: z, var } | Observation::Climb { rate: z, var } => {
                     z.is_finite() && var > 0.0 && var.is_finite()
                 }
-                Observation::Tdoa { n, sites } => {
+                Observation::Tdoa { n, sites, persistent } => {
                     (2..=3).contains(&n)
                         && sites[..n as usize].iter().all(|(p, t, s)| {
                             p.iter().all(|v| v.is_finite()) && t.is_finite() && *s > 0.0 && s.is_finite()
+                        })
+                        && persistent[..n as usize].iter().all(|p| {
+                            p.var_s2.is_finite()
+                                && p.var_s2 >= 0.0
+                                && p.shared_by.is_finite()
+                                && p.shared_by >= 1.0
                         })
                 }
             };
@@ -466,15 +472,13 @@ impl Fuser {
         }
         let Some(a) = self.aircraft.get_mut(&g.addr) else { return };
         let recent = a.tdoa_recent.add(g.t, TDOA_SPAN_S);
-        let g = &TdoaGroup {
-            addr: g.addr,
-            t: g.t,
-            sites: g.sites_for(recent, TDOA_SPAN_S),
-            persistent: g.persistent.clone(),
-            unheard: g.unheard.clone(),
-        };
-        if !a.fused.has_position() || self.sparse_mirrored(g) {
-            return self.sparse_tdoa(g, now, out);
+        let n = g.sites.len();
+        let mut persistent = [Persistent::default(); 3];
+        for (d, &(var_s2, lasts)) in persistent.iter_mut().zip(&g.persistent) {
+            *d = Persistent { var_s2, shared_by: TdoaGroup::shared_by(recent, lasts, TDOA_SPAN_S) };
+        }
+        if !a.fused.has_position() || self.sparse_mirrored(g, &persistent[..n]) {
+            return self.sparse_tdoa(g, &persistent[..n], now, out);
         }
         self.release_cloud(g.addr);
         let mut sites = [([0.0; 3], 0.0, 0.0); 3];
@@ -484,7 +488,7 @@ impl Fuser {
         let m = Measurement {
             t: g.t,
             source: Source::Mlat,
-            obs: Observation::Tdoa { n: g.sites.len() as u8, sites },
+            obs: Observation::Tdoa { n: n as u8, sites, persistent },
         };
         self.stats.tdoa += 1;
         self.on_measurement(g.addr, None, m, now, out);

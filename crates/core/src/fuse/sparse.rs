@@ -14,9 +14,9 @@
 use super::{Aircraft, Fuser, Output, TrackReport};
 use crate::fuse::TrackSource;
 use crate::mlat::engine::TdoaGroup;
-use crate::track::measurement::{Measurement, Observation, Outcome, Source};
+use crate::track::measurement::{Measurement, Observation, Outcome, Persistent, Source};
 use crate::track::motion::Motion;
-use crate::track::particle::{mirrors, SparseOutcome, SparseTrack};
+use crate::track::particle::{mirrors, with_persistent, SparseOutcome, SparseTrack};
 use crate::track::Estimate;
 
 /// A height older than this does not place the aircraft on its surface (s).
@@ -29,7 +29,13 @@ fn height_at(a: &Aircraft, t: f64) -> Option<f64> {
 
 impl Fuser {
     /// One transmission's time differences for an aircraft without a position.
-    pub(super) fn sparse_tdoa(&mut self, g: &TdoaGroup, now: f64, out: &mut Vec<Output>) {
+    pub(super) fn sparse_tdoa(
+        &mut self,
+        g: &TdoaGroup,
+        persistent: &[Persistent],
+        now: f64,
+        out: &mut Vec<Output>,
+    ) {
         let cfg = &self.tcfg.sparse;
         let Some(a) = self.aircraft.get_mut(&g.addr) else { return };
         if !cfg.enabled || a.adsb_heard {
@@ -49,7 +55,9 @@ impl Fuser {
                 return;
             }
             None => {
-                let Some(s) = SparseTrack::start(cfg, &g.sites, g.unheard.as_ref(), g.t, h, g.addr as u64)
+                // A new cloud remembers this transmission alone.
+                let once = with_persistent(&g.sites, persistent, |_| 1.0);
+                let Some(s) = SparseTrack::start(cfg, &once, g.unheard.as_ref(), g.t, h, g.addr as u64)
                 else {
                     return;
                 };
@@ -59,7 +67,7 @@ impl Fuser {
             }
             Some(s) => {
                 let resamples = s.resamples;
-                match s.update(cfg, &g.sites, g.unheard.as_ref(), g.t, h) {
+                match s.update_with(cfg, &g.sites, persistent, g.unheard.as_ref(), g.t, h) {
                     SparseOutcome::Updated => stats.updates += 1,
                     SparseOutcome::Restarted => {
                         stats.restarts += 1;
@@ -98,6 +106,9 @@ impl Fuser {
             stats.handed_over_one_mode += 1;
         }
         a.sparse_due = g.t + period;
+        if std::env::var("PFDBG").is_ok() {
+            eprintln!("PFPUB {:06X} {:.6}", g.addr, t);
+        }
         stats.published += 1;
         out.push(Output::Track(Box::new(TrackReport {
             id: a.id,
@@ -155,7 +166,7 @@ impl Fuser {
     /// the aircraft goes back to a cloud, which can hold both. One time
     /// difference's far solutions are its curve's, which the tracks' own
     /// history rules out.
-    pub(super) fn sparse_mirrored(&mut self, g: &TdoaGroup) -> bool {
+    pub(super) fn sparse_mirrored(&mut self, g: &TdoaGroup, persistent: &[Persistent]) -> bool {
         let Some(a) = self.aircraft.get(&g.addr) else { return false };
         if !a.sparse_geometry || g.sites.len() != 3 {
             return false;
@@ -165,7 +176,8 @@ impl Fuser {
             (est.state.x.fixed_rows::<2>(0).into_owned(), est.state.p.fixed_view::<2, 2>(0, 0).into_owned());
         // With no solution near the tracks they are off, not on a mirror:
         // the gate sees to that.
-        let m = mirrors(&est.plane, &g.sites, h, g.unheard.as_ref(), g.t, position);
+        let sites = with_persistent(&g.sites, persistent, |_| 1.0);
+        let m = mirrors(&est.plane, &sites, h, g.unheard.as_ref(), g.t, position);
         if !(m.own && m.open) {
             return false;
         }

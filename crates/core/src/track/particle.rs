@@ -22,6 +22,9 @@
 //! not the time differences, bounds how far out along a hyperbola the
 //! aircraft can be. When no particle explains a measurement the cloud has
 //! lost the aircraft: it starts again from that measurement and counts it.
+//! A receiver's persistent timing error (its learnt offset's) is counted
+//! as often as the cloud's spread says it remembers transmissions
+//! ([`Persistent::memory`]), as the Gaussian tracks count it.
 //! Who heard each transmission and who did not weighs the particles too
 //! ([`super::hearing`]), and a cloud is published only once that rules
 //! out the newest transmission's mirror solutions, which the time
@@ -35,6 +38,7 @@ use serde::{Deserialize, Serialize};
 
 use super::hearing::Hearing;
 use super::kf::Gaussian;
+use super::measurement::Persistent;
 use super::plane::Plane;
 use crate::mlat::coverage::Unheard;
 use crate::problem::{positive, Problem};
@@ -291,8 +295,23 @@ impl SparseTrack {
         t: f64,
         h: f64,
     ) -> SparseOutcome {
-        let Some(d) = Differences::new(&self.plane, sites, h) else { return SparseOutcome::Unusable };
-        self.last = Some(Last { sites: sites.to_vec(), h, unheard: unheard.cloned() });
+        self.update_with(cfg, sites, &[], unheard, t, h)
+    }
+
+    /// [`Self::update`] with each site's `persistent` error besides the
+    /// error `sites` give (each transmission's own), counted as often as
+    /// the cloud's memory holds transmissions ([`Persistent::memory`]): how
+    /// spread its particles' predictions of the differences are.
+    pub fn update_with(
+        &mut self,
+        cfg: &SparseConfig,
+        sites: Sites,
+        persistent: &[Persistent],
+        unheard: Option<&Unheard>,
+        t: f64,
+        h: f64,
+    ) -> SparseOutcome {
+        let Some(fresh) = Differences::new(&self.plane, sites, h) else { return SparseOutcome::Unusable };
         let dt = (t - self.t).max(0.0);
         self.t = self.t.max(t);
         let q = cfg.accel_ms2;
@@ -304,16 +323,18 @@ impl SparseTrack {
             x[2] += ae * dt;
             x[3] += an * dt;
         }
+        let res: Vec<[f64; 2]> = self.x.iter().map(|x| fresh.residual(&self.plane, x[0], x[1], h)).collect();
+        let counted = self.counted(sites, persistent, &fresh, &res);
+        let Some(d) = Differences::new(&self.plane, &counted, h) else { return SparseOutcome::Unusable };
+        self.last = Some(Last { sites: counted.clone(), h, unheard: unheard.cloned() });
         // Beyond a site's horizon, or faster than any airliner: impossible.
         let max_speed = cfg.speed_ms[1] * 1.25;
-        let chi: Vec<f64> = self
-            .x
-            .iter()
-            .map(|x| {
+        let chi: Vec<f64> = (self.x.iter().zip(&res))
+            .map(|(x, r)| {
                 if !d.visible(&self.plane, x[0], x[1], h) || x[2].hypot(x[3]) > max_speed {
                     f64::INFINITY
                 } else {
-                    d.chi2(d.residual(&self.plane, x[0], x[1], h))
+                    d.chi2(*r)
                 }
             })
             .collect();
@@ -321,7 +342,9 @@ impl SparseTrack {
         // NaN included: no particle explained it.
         if best.is_nan() || best > LOST_CHI2 {
             self.restarts += 1;
-            return if self.place(cfg, sites, unheard, h) {
+            // A new cloud remembers this transmission alone.
+            let once = with_persistent(sites, persistent, |_| 1.0);
+            return if self.place(cfg, &once, unheard, h) {
                 SparseOutcome::Restarted
             } else {
                 SparseOutcome::Unusable
@@ -342,6 +365,39 @@ impl SparseTrack {
             self.resample(&d, h);
         }
         SparseOutcome::Updated
+    }
+
+    /// The sites with each one's persistent error counted as often as the
+    /// cloud's memory holds transmissions: the spread of its particles'
+    /// residuals `res` (under `fresh`, each transmission's own error) is
+    /// what it knows along the differences.
+    fn counted(
+        &self,
+        sites: Sites,
+        persistent: &[Persistent],
+        fresh: &Differences,
+        res: &[[f64; 2]],
+    ) -> Vec<([f64; 3], f64, f64)> {
+        if persistent.iter().all(|p| p.var_s2 == 0.0) {
+            return sites.to_vec();
+        }
+        let c2 = crate::mlat::solver::C_AIR.powi(2);
+        let m = fresh.n - 1;
+        let (mut mean, mut spread) = ([0.0; 2], 0.0);
+        for (r, w) in res.iter().zip(&self.w) {
+            for k in 0..m {
+                mean[k] += w * r[k];
+            }
+        }
+        for (r, w) in res.iter().zip(&self.w) {
+            spread += (0..m).map(|k| w * (r[k] - mean[k]).powi(2)).sum::<f64>();
+        }
+        // Traces over the differences, each against the first site.
+        let var = |i: usize| sites.get(i).map_or(0.0, |s| s.2 * s.2 * c2);
+        let once = |i: usize| persistent.get(i).map_or(0.0, |p| p.var_s2 * c2);
+        let trace = |v: &dyn Fn(usize) -> f64| (1..=m).map(|i| v(0) + v(i)).sum::<f64>();
+        let memory = Persistent::memory(spread, trace(&var), trace(&once));
+        with_persistent(sites, persistent, |p| memory.min(p.shared_by).max(1.0))
     }
 
     /// Systematic resampling, then a Gaussian kernel jitter of the cloud's
@@ -506,6 +562,21 @@ pub fn mirrors(
     m
 }
 
+/// `sites` with each one's `persistent` variance counted `times(p)` times
+/// into its sigma.
+pub fn with_persistent(
+    sites: Sites,
+    persistent: &[Persistent],
+    times: impl Fn(&Persistent) -> f64,
+) -> Vec<([f64; 3], f64, f64)> {
+    (sites.iter().enumerate())
+        .map(|(i, &(pos, t, sigma))| {
+            let extra = persistent.get(i).map_or(0.0, |p| p.var_s2 * times(p));
+            (pos, t, (sigma * sigma + extra).sqrt())
+        })
+        .collect()
+}
+
 /// Mean and covariance of [e, n, ve, vn] as the trackers' six-state Gaussian.
 fn as_gaussian(m: &Vector4<f64>, cov: &Matrix4<f64>) -> Gaussian {
     let mut g = Gaussian { x: Vector6::new(m[0], m[1], m[2], m[3], 0.0, 0.0), p: Matrix6::zeros() };
@@ -514,54 +585,4 @@ fn as_gaussian(m: &Vector4<f64>, cov: &Matrix4<f64>) -> Gaussian {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::geo::geodetic_to_ecef;
-    use crate::mlat::solver::C_AIR;
-
-    /// Three sites 60 km apart, an aircraft 80 km from them at 10 km flying
-    /// east at 200 m/s, a transmission a second: the cloud must find it and
-    /// say how well it knows it.
-    #[test]
-    fn three_sites_place_the_aircraft() {
-        let (lat0, lon0, h) = (43.6, 1.45, 10_000.0);
-        let plane = Plane::new(lat0, lon0, 0.0);
-        let site = |e: f64, n: f64| {
-            let (lat, lon) = plane.to_geodetic(e, n);
-            geodetic_to_ecef(lat, lon, 150.0)
-        };
-        let rx = [site(0.0, 30_000.0), site(26_000.0, -15_000.0), site(-26_000.0, -15_000.0)];
-        let sigma_s = 50e-9;
-        let mut noise = <ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
-        let sites_at = |t: f64, noise: &mut ChaCha8Rng| {
-            let (lat, lon) = plane.to_geodetic(-40_000.0 + 200.0 * t, 70_000.0);
-            let p = geodetic_to_ecef(lat, lon, h);
-            rx.map(|r| {
-                let toa = t
-                    + crate::geo::ecef_distance(p, r) / C_AIR
-                    + sigma_s * noise.sample::<f64, _>(StandardNormal);
-                (r, toa, sigma_s)
-            })
-        };
-        let cfg = SparseConfig { enabled: true, ..Default::default() };
-        let mut s = SparseTrack::start(&cfg, &sites_at(0.0, &mut noise), None, 0.0, h, 1).unwrap();
-        for k in 1..=60 {
-            let t = k as f64;
-            assert_ne!(s.update(&cfg, &sites_at(t, &mut noise), None, t, h), SparseOutcome::Unusable);
-        }
-        let (m, cov) = s.moments();
-        let (lat, lon) = plane.to_geodetic(-40_000.0 + 200.0 * 60.0, 70_000.0);
-        let at = s.gaussian().0.to_en(lat, lon);
-        let err = nalgebra::Vector2::new(m[0] - at[0], m[1] - at[1]);
-        let p = cov.fixed_view::<2, 2>(0, 0).into_owned();
-        let nees = (err.transpose() * p.try_inverse().unwrap() * err)[0];
-        assert!(err.norm() < 1_000.0, "{} m off", err.norm());
-        assert!(nees < 13.8, "NEES {nees} (99.9% of chi-square 2)");
-        assert!(s.unimodal());
-        // A transmission 6 km of range off: no particle explains it.
-        let far =
-            sites_at(0.0, &mut noise).map(|(r, toa, sg)| (r, toa + if r == rx[0] { 20e-6 } else { 0.0 }, sg));
-        assert_eq!(s.update(&cfg, &far, None, 61.0, h), SparseOutcome::Restarted);
-        assert_eq!(s.restarts, 1);
-    }
-}
+mod tests;

@@ -43,7 +43,7 @@ use super::imm::{Imm, ImmSpec};
 use super::kf::{self, Gaussian, Linear};
 use super::lifecycle::Lifecycle;
 pub use super::lifecycle::Stage;
-pub use super::measurement::{Measurement, Observation, Outcome, Source};
+pub use super::measurement::{Measurement, Observation, Outcome, Persistent, Source};
 use super::noise::Noise;
 use super::plane::Plane;
 
@@ -372,7 +372,9 @@ impl Track {
                 true => Outcome::Applied { nis: 0.0 },
                 false => Outcome::Gated,
             },
-            Observation::Tdoa { n, sites } => self.tdoa(m.t, dt, &sites[..n as usize]),
+            Observation::Tdoa { n, sites, persistent } => {
+                self.tdoa(m.t, dt, &sites[..n as usize], &persistent[..n as usize])
+            }
         };
         // The horizontal filter moved to m.t only if it took the measurement.
         if matches!(outcome, Outcome::Applied { .. } | Outcome::Restarted)

@@ -43,7 +43,7 @@ pub struct TdoaGroup {
     /// Each site's share of that sigma that persists from one transmission
     /// to the next (the error of its learnt offset): its variance (s^2) and
     /// how long it lasts (s). The same error in every transmission a track
-    /// takes, it cannot be averaged away (see [`TdoaGroup::sites_for`]).
+    /// takes, it cannot be averaged away (see `track::Persistent`).
     pub persistent: Vec<(f64, f64)>,
     /// Who heard it, with every receiver's coverage: the silence of the
     /// others places it too (`None` where nothing is known of coverage).
@@ -51,19 +51,10 @@ pub struct TdoaGroup {
 }
 
 impl TdoaGroup {
-    /// The sites with their sigmas for a filter that has taken `recent`
-    /// transmissions of the aircraft over the last `span_s`: each site's
-    /// persistent variance counted once for every one of them that shares
-    /// it (those within the time it lasts), so that the filter, taking each
-    /// transmission as independent, is not made surer than one of them can
-    /// make it about that error.
-    pub fn sites_for(&self, recent: f64, span_s: f64) -> Vec<([f64; 3], f64, f64)> {
-        (self.sites.iter().zip(&self.persistent))
-            .map(|(&(pos, t, sigma), &(var, lasts))| {
-                let sharing = (recent * lasts.min(span_s) / span_s).max(1.0);
-                (pos, t, (sigma * sigma + var * sharing).sqrt())
-            })
-            .collect()
+    /// How many of `recent` transmissions over `span_s` share an error that
+    /// lasts `lasts` s (at least this one).
+    pub fn shared_by(recent: f64, lasts: f64, span_s: f64) -> f64 {
+        (recent * lasts.min(span_s) / span_s).max(1.0)
     }
 }
 
@@ -107,25 +98,16 @@ impl GroupOutcome {
 mod tests {
     use super::*;
 
-    /// A persistent error is counted once per transmission sharing it
-    /// within the span, the white part as it is; a site with none, as given.
+    /// The transmissions sharing a persistent error: those within the time
+    /// it lasts, at least this one.
     #[test]
-    fn a_persistent_error_counted_for_every_transmission_sharing_it() {
-        let g = TdoaGroup {
-            addr: 1,
-            t: 0.0,
-            sites: vec![([0.0; 3], 0.0, 50e-9), ([1.0; 3], 1e-6, 30e-9)],
-            persistent: vec![(64e-18, f64::INFINITY), (0.0, 0.0)],
-            unheard: None,
-        };
-        let alone = g.sites_for(1.0, 30.0);
-        assert!((alone[0].2 - (2500e-18f64 + 64e-18).sqrt()).abs() < 1e-15);
-        assert_eq!(alone[1], g.sites[1]);
+    fn a_persistent_error_is_shared_by_the_transmissions_it_lasts_over() {
+        assert_eq!(TdoaGroup::shared_by(1.0, f64::INFINITY, 30.0), 1.0);
         // Sixty transmissions in the span, the error lasting beyond it: all share it.
-        let many = g.sites_for(60.0, 30.0);
-        assert!((many[0].2 - (2500e-18f64 + 60.0 * 64e-18).sqrt()).abs() < 1e-15);
+        assert_eq!(TdoaGroup::shared_by(60.0, f64::INFINITY, 30.0), 60.0);
         // An error that lasts a tenth of the span is shared by a tenth of them.
-        let brief = TdoaGroup { persistent: vec![(64e-18, 3.0), (0.0, 0.0)], ..g.clone() };
-        assert!((brief.sites_for(60.0, 30.0)[0].2 - (2500e-18f64 + 6.0 * 64e-18).sqrt()).abs() < 1e-15);
+        assert_eq!(TdoaGroup::shared_by(60.0, 3.0, 30.0), 6.0);
+        // A brief one by this transmission alone.
+        assert_eq!(TdoaGroup::shared_by(60.0, 0.0, 30.0), 1.0);
     }
 }
