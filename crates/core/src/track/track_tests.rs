@@ -389,15 +389,20 @@ fn a_filter_gone_bad_is_restarted_not_used() {
     assert_eq!(tr.restarts, 1);
 }
 
+/// Three receivers 30-50 km around the tests' aircraft (ECEF).
+fn three_receivers() -> Vec<[f64; 3]> {
+    [(45.2, 4.8), (44.8, 5.3), (45.3, 5.5)]
+        .iter()
+        .map(|&(la, lo)| crate::geo::geodetic_to_ecef(la, lo, 200.0))
+        .collect()
+}
+
 #[test]
 fn time_differences_alone_keep_a_track_on_the_truth() {
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
     // Three receivers 30-50 km around; the aircraft flies east at 200 m/s, 3 km up.
-    let rx: Vec<[f64; 3]> = [(45.2, 4.8), (44.8, 5.3), (45.3, 5.5)]
-        .iter()
-        .map(|&(la, lo)| crate::geo::geodetic_to_ecef(la, lo, 200.0))
-        .collect();
+    let rx = three_receivers();
     let noise = Normal::new(0.0, 50e-9).unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
     let (mut with, mut without) = (track(), track());
@@ -463,10 +468,7 @@ fn time_differences_alone_keep_a_track_on_the_truth() {
 fn persistent_timing_errors_are_counted_as_often_as_the_track_remembers() {
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
-    let rx: Vec<[f64; 3]> = [(45.2, 4.8), (44.8, 5.3), (45.3, 5.5)]
-        .iter()
-        .map(|&(la, lo)| crate::geo::geodetic_to_ecef(la, lo, 200.0))
-        .collect();
+    let rx = three_receivers();
     let (fresh_s, persistent_s) = (30e-9, 20e-9);
     #[derive(Clone, Copy, Debug, PartialEq)]
     enum Count {

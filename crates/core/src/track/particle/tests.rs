@@ -6,23 +6,53 @@ use super::*;
 use crate::geo::geodetic_to_ecef;
 use crate::mlat::solver::C_AIR;
 
+/// The tests' world: a plane at 43.6 N 1.45 E, three sites 60 km apart on
+/// it, and an aircraft 80 km from them at 10 km flying east at 200 m/s.
+struct World {
+    plane: Plane,
+    rx: [[f64; 3]; 3],
+    h: f64,
+}
+
+impl World {
+    fn new() -> World {
+        let plane = Plane::new(43.6, 1.45, 0.0);
+        let site = |e: f64, n: f64| {
+            let (lat, lon) = plane.to_geodetic(e, n);
+            geodetic_to_ecef(lat, lon, 150.0)
+        };
+        let rx = [site(0.0, 30_000.0), site(26_000.0, -15_000.0), site(-26_000.0, -15_000.0)];
+        World { plane, rx, h: 10_000.0 }
+    }
+
+    /// The aircraft's ECEF position at `t`.
+    fn aircraft(&self, t: f64) -> [f64; 3] {
+        let (lat, lon) = self.plane.to_geodetic(-40_000.0 + 200.0 * t, 70_000.0);
+        geodetic_to_ecef(lat, lon, self.h)
+    }
+
+    /// The cloud's position error (its plane's east, north) and NEES at `t`.
+    fn error(&self, s: &SparseTrack, t: f64) -> (nalgebra::Vector2<f64>, f64) {
+        let (m, cov) = s.moments();
+        let (lat, lon) = self.plane.to_geodetic(-40_000.0 + 200.0 * t, 70_000.0);
+        let at = s.gaussian().0.to_en(lat, lon);
+        let err = nalgebra::Vector2::new(m[0] - at[0], m[1] - at[1]);
+        let p = cov.fixed_view::<2, 2>(0, 0).into_owned();
+        (err, (err.transpose() * p.try_inverse().unwrap() * err)[0])
+    }
+}
+
 /// Three sites 60 km apart, an aircraft 80 km from them at 10 km flying
 /// east at 200 m/s, a transmission a second: the cloud must find it and
 /// say how well it knows it.
 #[test]
 fn three_sites_place_the_aircraft() {
-    let (lat0, lon0, h) = (43.6, 1.45, 10_000.0);
-    let plane = Plane::new(lat0, lon0, 0.0);
-    let site = |e: f64, n: f64| {
-        let (lat, lon) = plane.to_geodetic(e, n);
-        geodetic_to_ecef(lat, lon, 150.0)
-    };
-    let rx = [site(0.0, 30_000.0), site(26_000.0, -15_000.0), site(-26_000.0, -15_000.0)];
+    let w = World::new();
+    let (rx, h) = (w.rx, w.h);
     let sigma_s = 50e-9;
     let mut noise = <ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
     let sites_at = |t: f64, noise: &mut ChaCha8Rng| {
-        let (lat, lon) = plane.to_geodetic(-40_000.0 + 200.0 * t, 70_000.0);
-        let p = geodetic_to_ecef(lat, lon, h);
+        let p = w.aircraft(t);
         rx.map(|r| {
             let toa = t
                 + crate::geo::ecef_distance(p, r) / C_AIR
@@ -36,12 +66,7 @@ fn three_sites_place_the_aircraft() {
         let t = k as f64;
         assert_ne!(s.update(&cfg, &sites_at(t, &mut noise), None, t, h), SparseOutcome::Unusable);
     }
-    let (m, cov) = s.moments();
-    let (lat, lon) = plane.to_geodetic(-40_000.0 + 200.0 * 60.0, 70_000.0);
-    let at = s.gaussian().0.to_en(lat, lon);
-    let err = nalgebra::Vector2::new(m[0] - at[0], m[1] - at[1]);
-    let p = cov.fixed_view::<2, 2>(0, 0).into_owned();
-    let nees = (err.transpose() * p.try_inverse().unwrap() * err)[0];
+    let (err, nees) = w.error(&s, 60.0);
     assert!(err.norm() < 1_000.0, "{} m off", err.norm());
     assert!(nees < 13.8, "NEES {nees} (99.9% of chi-square 2)");
     assert!(s.unimodal());
@@ -57,24 +82,16 @@ fn three_sites_place_the_aircraft() {
 /// a transmission a second): its mean NEES over the last 10 of 40
 /// seconds, over `runs` runs.
 fn mean_nees(runs: u64, by_memory: bool) -> f64 {
-    let (lat0, lon0, h) = (43.6, 1.45, 10_000.0);
-    let plane = Plane::new(lat0, lon0, 0.0);
-    let site = |e: f64, n: f64| {
-        let (lat, lon) = plane.to_geodetic(e, n);
-        geodetic_to_ecef(lat, lon, 150.0)
-    };
-    let rx = [site(0.0, 30_000.0), site(26_000.0, -15_000.0), site(-26_000.0, -15_000.0)];
+    let w = World::new();
+    let (rx, h) = (w.rx, w.h);
     let (fresh_s, persistent_s) = (30e-9, 20e-9);
     let cfg = SparseConfig::default();
-    let truth = |t: f64| (-40_000.0 + 200.0 * t, 70_000.0);
     let (mut nees, mut n) = (0.0, 0);
     for run in 0..runs {
         let mut noise = <ChaCha8Rng as rand::SeedableRng>::seed_from_u64(run * 31 + 5);
         let offset: [f64; 3] = std::array::from_fn(|_| persistent_s * noise.sample::<f64, _>(StandardNormal));
         let mut sites_at = |t: f64| {
-            let (e, n) = truth(t);
-            let (lat, lon) = plane.to_geodetic(e, n);
-            let p = geodetic_to_ecef(lat, lon, h);
+            let p = w.aircraft(t);
             let mut k = 0;
             rx.map(|r| {
                 k += 1;
@@ -95,13 +112,7 @@ fn mean_nees(runs: u64, by_memory: bool) -> f64 {
                 s.update(&cfg, &every, None, t, h);
             }
             if k > 30 {
-                let (m, cov) = s.moments();
-                let (e, n_) = truth(t);
-                let (lat, lon) = plane.to_geodetic(e, n_);
-                let at = s.gaussian().0.to_en(lat, lon);
-                let err = nalgebra::Vector2::new(m[0] - at[0], m[1] - at[1]);
-                let p = cov.fixed_view::<2, 2>(0, 0).into_owned();
-                nees += (err.transpose() * p.try_inverse().unwrap() * err)[0];
+                nees += w.error(&s, t).1;
                 n += 1;
             }
         }
