@@ -55,13 +55,20 @@ pub enum Observation {
 /// (the error of its learnt offset): the same in every one a track takes,
 /// it cannot be averaged away, and a track counts it as often as its own
 /// memory holds transmissions (`track::tdoa`).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Persistent {
     /// Its variance (s^2).
     pub var_s2: f64,
     /// The most transmissions it is shared by: those of the aircraft within
     /// the time it lasts (at least 1).
     pub shared_by: f64,
+}
+
+/// None: no error shared with any other transmission.
+impl Default for Persistent {
+    fn default() -> Self {
+        Persistent { var_s2: 0.0, shared_by: 1.0 }
+    }
 }
 
 impl Persistent {
