@@ -106,9 +106,6 @@ impl Fuser {
             stats.handed_over_one_mode += 1;
         }
         a.sparse_due = g.t + period;
-        if std::env::var("PFDBG").is_ok() {
-            eprintln!("PFPUB {:06X} {:.6}", g.addr, t);
-        }
         stats.published += 1;
         out.push(Output::Track(Box::new(TrackReport {
             id: a.id,
