@@ -324,9 +324,17 @@ impl SparseTrack {
             x[3] += an * dt;
         }
         let res: Vec<[f64; 2]> = self.x.iter().map(|x| fresh.residual(&self.plane, x[0], x[1], h)).collect();
-        let counted = self.counted(sites, persistent, &fresh, &res);
-        let Some(d) = Differences::new(&self.plane, &counted, h) else { return SparseOutcome::Unusable };
-        self.last = Some(Last { sites: counted.clone(), h, unheard: unheard.cloned() });
+        // The residuals are the same under either; only the noise differs.
+        let counted = self.counted(sites, persistent, &res);
+        let d = match &counted {
+            Some(c) => {
+                let Some(d) = Differences::new(&self.plane, c, h) else { return SparseOutcome::Unusable };
+                d
+            }
+            None => fresh,
+        };
+        let sites_counted = counted.unwrap_or_else(|| sites.to_vec());
+        self.last = Some(Last { sites: sites_counted, h, unheard: unheard.cloned() });
         // Beyond a site's horizon, or faster than any airliner: impossible.
         let max_speed = cfg.speed_ms[1] * 1.25;
         let chi: Vec<f64> = (self.x.iter().zip(&res))
@@ -369,20 +377,19 @@ impl SparseTrack {
 
     /// The sites with each one's persistent error counted as often as the
     /// cloud's memory holds transmissions: the spread of its particles'
-    /// residuals `res` (under `fresh`, each transmission's own error) is
-    /// what it knows along the differences.
+    /// residuals `res` is what it knows along the differences. `None` when
+    /// no site has one: the sites as they are.
     fn counted(
         &self,
         sites: Sites,
         persistent: &[Persistent],
-        fresh: &Differences,
         res: &[[f64; 2]],
-    ) -> Vec<([f64; 3], f64, f64)> {
+    ) -> Option<Vec<([f64; 3], f64, f64)>> {
         if persistent.iter().all(|p| p.var_s2 == 0.0) {
-            return sites.to_vec();
+            return None;
         }
         let c2 = crate::mlat::solver::C_AIR.powi(2);
-        let m = fresh.n - 1;
+        let m = sites.len() - 1;
         let (mut mean, mut spread) = ([0.0; 2], 0.0);
         for (r, w) in res.iter().zip(&self.w) {
             for k in 0..m {
@@ -397,7 +404,7 @@ impl SparseTrack {
         let once = |i: usize| persistent.get(i).map_or(0.0, |p| p.var_s2 * c2);
         let trace = |v: &dyn Fn(usize) -> f64| (1..=m).map(|i| v(0) + v(i)).sum::<f64>();
         let memory = Persistent::memory(spread, trace(&var), trace(&once));
-        with_persistent(sites, persistent, |p| memory.min(p.shared_by).max(1.0))
+        Some(with_persistent(sites, persistent, |p| memory.min(p.shared_by).max(1.0)))
     }
 
     /// Systematic resampling, then a Gaussian kernel jitter of the cloud's
