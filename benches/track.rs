@@ -131,6 +131,46 @@ fn bench(c: &mut Criterion) {
             criterion::BatchSize::SmallInput,
         )
     });
+    // A Comm-B velocity report (2 m/s per axis): the first, which the
+    // cloud, its velocities spread over every airliner's, takes in steps,
+    // and the next ones, each one step.
+    let (v_en, v_cov) = (nalgebra::Vector2::new(100.0, 50.0), nalgebra::Matrix2::identity() * 4.0);
+    let tracked = || {
+        let mut s = SparseTrack::start(&pcfg, &toas(0.0), None, 0.0, 9000.0, 1).expect("placed");
+        for k in 1..=10 {
+            let t = k as f64 * 0.5;
+            s.update(&pcfg, &toas(t), None, t, 9000.0);
+        }
+        s
+    };
+    g.throughput(Throughput::Elements(1));
+    g.bench_function("first_velocity_report_1000_particles", |b| {
+        b.iter_batched(
+            tracked,
+            |mut s| {
+                black_box(s.velocity(&pcfg, v_en, v_cov, 5.0));
+                s
+            },
+            criterion::BatchSize::SmallInput,
+        )
+    });
+    g.throughput(Throughput::Elements(100));
+    g.bench_function("velocity_reports_1000_particles", |b| {
+        b.iter_batched(
+            || {
+                let mut s = tracked();
+                s.velocity(&pcfg, v_en, v_cov, 5.0);
+                s
+            },
+            |mut s| {
+                for k in 1..=100 {
+                    black_box(s.velocity(&pcfg, v_en, v_cov, 5.0 + k as f64 * 0.01));
+                }
+                s
+            },
+            criterion::BatchSize::SmallInput,
+        )
+    });
     g.finish();
 
     // The full tracker: 1,000 aircraft, one ADS-B position each per step.

@@ -506,6 +506,9 @@ fn a_burst_of_frames_in_one_tcp_read_is_processed_whole() {
         // One aircraft decoded; one position, never paired, makes no track.
         "fuse1090_aircraft_held{table=\"decoder\"} 1",
         "fuse1090_aircraft_held{table=\"tracker\"} 0",
+        // The particle filters' (none started: one aircraft with a position).
+        "fuse1090_sparse_filters_total{event=\"restarted\"} 0",
+        "fuse1090_sparse_velocity_reports_total{outcome=\"contradicting\"} 0",
     ] {
         assert!(text.lines().any(|l| l == want), "{want} not in:\n{text}");
     }

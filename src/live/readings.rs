@@ -144,6 +144,30 @@ fn series(front: &FrontSnapshot, back: &Back, reg: &Registry, r: &mut Vec<Readin
     for (reason, n) in f.rejected() {
         r.push(Reading::labelled("fuse1090_measurements_rejected_total", ("reason", reason.to_string()), n));
     }
+    // The particle filters of aircraft heard by too few receivers for a fix.
+    let sp = &f.sparse;
+    for (what, n) in [
+        ("started", sp.started),
+        ("refused", sp.refused),
+        ("restarted", sp.restarts),
+        ("handed_over_at_a_fix", sp.handed_over),
+        ("handed_over_at_one_mode", sp.handed_over_one_mode),
+        ("given_back", sp.given_back + sp.mirrored),
+    ] {
+        r.push(Reading::labelled("fuse1090_sparse_filters_total", ("event", what.to_string()), n));
+    }
+    r.push(Reading::new("fuse1090_sparse_published_total", Counter, sp.published, None));
+    for (outcome, n) in [
+        ("taken", sp.velocities),
+        ("contradicting", sp.velocities_contradicting),
+        ("confirming_a_change", sp.velocities_redrawn),
+    ] {
+        r.push(Reading::labelled(
+            "fuse1090_sparse_velocity_reports_total",
+            ("outcome", outcome.to_string()),
+            n,
+        ));
+    }
     let held = AircraftHeld { tracker: back.fuser().tracks(), ..front.held };
     for (table, n) in [
         ("decoder", held.decoder),

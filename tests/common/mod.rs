@@ -97,9 +97,19 @@ for line in open(sys.argv[1]):
 /// A fixture scenario (`fixtures/scenarios/NAME.toml`) simulated on another
 /// seed than its own (a world nothing was tuned on): its capture and truth.
 pub fn simulated(name: &str, seed: u64) -> (Vec<u8>, fuse1090::eval::Truth) {
+    simulated_with(name, seed, |_| {})
+}
+
+/// [`simulated`] with the scenario changed by `edit` first.
+pub fn simulated_with(
+    name: &str,
+    seed: u64,
+    edit: impl FnOnce(&mut fuse1090::sim::scenario::Scenario),
+) -> (Vec<u8>, fuse1090::eval::Truth) {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(format!("fixtures/scenarios/{name}.toml"));
     let mut s = fuse1090::sim::scenario::Scenario::load(&path).unwrap();
     s.seed = seed;
+    edit(&mut s);
     let (mut capture, mut truth) = (Vec::new(), Vec::new());
     fuse1090::sim::simulate(&s, &mut capture, &mut truth).unwrap();
     (capture, fuse1090::eval::Truth::read(truth.as_slice()).unwrap())

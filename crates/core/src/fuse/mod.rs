@@ -49,7 +49,7 @@ use crate::mlat::engine::TdoaGroup;
 use crate::recent::RecentCount;
 use crate::track::imm::ImmSpec;
 use crate::track::motion::{Fix2, Motion, MotionTest};
-use crate::track::particle::SparseTrack;
+use crate::track::particle::{SparseTrack, VelocityOutcome};
 use crate::track::plane::Plane;
 use crate::track::{Estimate, Measurement, Observation, Outcome, Persistent, Source, Track, TrackConfig};
 pub use config::FuseConfig;
@@ -380,6 +380,16 @@ impl Fuser {
         a.last_heard = now;
         if let Observation::Height { h, .. } = m.obs {
             a.height = Some((h, m.t));
+        }
+        if let (Observation::Velocity { v_en, cov, .. }, Some(s)) = (m.obs, a.sparse.as_mut()) {
+            // The cloud takes it as it comes (a velocity does not wait for
+            // fixes), and the tracks too, should they take over.
+            match s.velocity(&self.tcfg.sparse, v_en, cov, m.t) {
+                VelocityOutcome::Taken(_) => self.stats.sparse.velocities += 1,
+                VelocityOutcome::Contradicts => self.stats.sparse.velocities_contradicting += 1,
+                VelocityOutcome::Redrawn => self.stats.sparse.velocities_redrawn += 1,
+                VelocityOutcome::Unusable => {}
+            }
         }
         if nac_p.is_some() && m.source == Source::Adsb {
             a.nac_p = nac_p;

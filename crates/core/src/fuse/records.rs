@@ -133,6 +133,15 @@ pub struct SparseStats {
     pub mirrored: u64,
     /// Aircraft not given a filter: as many as `max_filters` were running.
     pub refused: u64,
+    /// Velocity reports (Comm-B) the clouds took.
+    pub velocities: u64,
+    /// Velocity reports no particle of a cloud that had taken some before
+    /// came near: left out.
+    pub velocities_contradicting: u64,
+    /// Velocity reports that confirmed the one that contradicted the cloud
+    /// before them (the aircraft turned or changed speed): the cloud's
+    /// velocities drawn again from them.
+    pub velocities_redrawn: u64,
 }
 
 /// One line for people (the offline run's report): what came in, what was
@@ -165,11 +174,15 @@ impl std::fmt::Display for FuseStats {
             write!(
                 f,
                 "; sparse geometry: {} particle filters ({} refused, table full), {} updates, {} restarts, \
-                 {} published, {} handed over at a fix, {} at one mode ({} given back, {} for a mirror), {} groups without a height",
+                 {} velocity reports ({} contradicting, left out, {} confirming a change), {} published, {} handed over at a fix, {} at one mode \
+                 ({} given back, {} for a mirror), {} groups without a height",
                 s.started,
                 s.refused,
                 s.updates,
                 s.restarts,
+                s.velocities,
+                s.velocities_contradicting,
+                s.velocities_redrawn,
                 s.published,
                 s.handed_over,
                 s.handed_over_one_mode,

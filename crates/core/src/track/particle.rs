@@ -44,7 +44,9 @@ use crate::mlat::coverage::Unheard;
 use crate::problem::{positive, Problem};
 
 mod surface;
+mod velocity;
 use surface::{pull, Differences};
+pub use velocity::VelocityOutcome;
 
 /// The particle filter's parameters (`[core.track.sparse]`).
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -165,6 +167,10 @@ pub struct SparseTrack {
     rng: ChaCha8Rng,
     pub restarts: u32,
     pub resamples: u32,
+    /// Velocity reports taken since the cloud was placed.
+    velocities: u32,
+    /// The newest report, if it contradicted the cloud.
+    contradicting: Option<velocity::Contradicting>,
     /// The newest transmission: its sites, the height, and who heard it.
     last: Option<Last>,
 }
@@ -211,6 +217,8 @@ impl SparseTrack {
             rng: <ChaCha8Rng as rand::SeedableRng>::seed_from_u64(seed),
             restarts: 0,
             resamples: 0,
+            velocities: 0,
+            contradicting: None,
             last: None,
         };
         s.place(cfg, sites, unheard, h).then_some(s)
@@ -252,6 +260,8 @@ impl SparseTrack {
             x.push(c);
         }
         self.x = x;
+        self.velocities = 0;
+        self.contradicting = None;
         let hearing = self.hearing(unheard, h).filter(|_| cfg.hearing_memory_s > 0.0);
         let cost: Vec<f64> =
             self.x.iter().map(|x| hearing.as_ref().map_or(0.0, |s| s.cost(x[0], x[1]))).collect();
@@ -312,17 +322,7 @@ impl SparseTrack {
         h: f64,
     ) -> SparseOutcome {
         let Some(fresh) = Differences::new(&self.plane, sites, h) else { return SparseOutcome::Unusable };
-        let dt = (t - self.t).max(0.0);
-        self.t = self.t.max(t);
-        let q = cfg.accel_ms2;
-        for x in &mut self.x {
-            let (ae, an): (f64, f64) = (self.rng.sample(StandardNormal), self.rng.sample(StandardNormal));
-            let (ae, an) = (ae * q, an * q);
-            x[0] += x[2] * dt + 0.5 * ae * dt * dt;
-            x[1] += x[3] * dt + 0.5 * an * dt * dt;
-            x[2] += ae * dt;
-            x[3] += an * dt;
-        }
+        let dt = self.predict(cfg, t);
         let res: Vec<[f64; 2]> = self.x.iter().map(|x| fresh.residual(&self.plane, x[0], x[1], h)).collect();
         // The residuals are the same under either; only the noise differs.
         let counted = self.counted(sites, persistent, &res);
@@ -368,11 +368,27 @@ impl SparseTrack {
             None => chi,
         };
         self.reweigh(&cost);
-        let ess = 1.0 / self.w.iter().map(|w| w * w).sum::<f64>();
-        if ess < cfg.resample_below * self.x.len() as f64 {
+        if self.ess() < cfg.resample_below * self.x.len() as f64 {
             self.resample(&d, h);
         }
         SparseOutcome::Updated
+    }
+
+    /// Moves the particles to `t` (never back) with a constant velocity
+    /// perturbed by white acceleration; returns how far (s).
+    fn predict(&mut self, cfg: &SparseConfig, t: f64) -> f64 {
+        let dt = (t - self.t).max(0.0);
+        self.t = self.t.max(t);
+        let q = cfg.accel_ms2;
+        for x in &mut self.x {
+            let (ae, an): (f64, f64) = (self.rng.sample(StandardNormal), self.rng.sample(StandardNormal));
+            let (ae, an) = (ae * q, an * q);
+            x[0] += x[2] * dt + 0.5 * ae * dt * dt;
+            x[1] += x[3] * dt + 0.5 * an * dt * dt;
+            x[2] += ae * dt;
+            x[3] += an * dt;
+        }
+        dt
     }
 
     /// The sites with each one's persistent error counted as often as the

@@ -8,14 +8,14 @@ use crate::mlat::solver::C_AIR;
 
 /// The tests' world: a plane at 43.6 N 1.45 E, three sites 60 km apart on
 /// it, and an aircraft 80 km from them at 10 km flying east at 200 m/s.
-struct World {
+pub(super) struct World {
     plane: Plane,
-    rx: [[f64; 3]; 3],
-    h: f64,
+    pub rx: [[f64; 3]; 3],
+    pub h: f64,
 }
 
 impl World {
-    fn new() -> World {
+    pub fn new() -> World {
         let plane = Plane::new(43.6, 1.45, 0.0);
         let site = |e: f64, n: f64| {
             let (lat, lon) = plane.to_geodetic(e, n);
@@ -26,19 +26,37 @@ impl World {
     }
 
     /// The aircraft's ECEF position at `t`.
-    fn aircraft(&self, t: f64) -> [f64; 3] {
+    pub fn aircraft(&self, t: f64) -> [f64; 3] {
         let (lat, lon) = self.plane.to_geodetic(-40_000.0 + 200.0 * t, 70_000.0);
         geodetic_to_ecef(lat, lon, self.h)
     }
 
     /// The cloud's position error (its plane's east, north) and NEES at `t`.
-    fn error(&self, s: &SparseTrack, t: f64) -> (nalgebra::Vector2<f64>, f64) {
+    pub fn error(&self, s: &SparseTrack, t: f64) -> (nalgebra::Vector2<f64>, f64) {
         let (m, cov) = s.moments();
         let (lat, lon) = self.plane.to_geodetic(-40_000.0 + 200.0 * t, 70_000.0);
         let at = s.gaussian().0.to_en(lat, lon);
         let err = nalgebra::Vector2::new(m[0] - at[0], m[1] - at[1]);
         let p = cov.fixed_view::<2, 2>(0, 0).into_owned();
         (err, (err.transpose() * p.try_inverse().unwrap() * err)[0])
+    }
+
+    /// One transmission at `t`: each site's position, time of arrival
+    /// with `sigma_s` of noise, and that sigma.
+    pub fn sites_at(&self, t: f64, sigma_s: f64, noise: &mut ChaCha8Rng) -> [([f64; 3], f64, f64); 3] {
+        let p = self.aircraft(t);
+        self.rx.map(|r| {
+            let toa = t
+                + crate::geo::ecef_distance(p, r) / C_AIR
+                + sigma_s * noise.sample::<f64, _>(StandardNormal);
+            (r, toa, sigma_s)
+        })
+    }
+
+    /// The aircraft's velocity (m/s) in `plane`'s east and north at `t`.
+    pub fn velocity_in(&self, plane: &Plane, t: f64) -> nalgebra::Vector2<f64> {
+        let d = plane.ecef_to_local(self.aircraft(t + 0.5)) - plane.ecef_to_local(self.aircraft(t - 0.5));
+        nalgebra::Vector2::new(d[0], d[1])
     }
 }
 
@@ -49,17 +67,8 @@ impl World {
 fn three_sites_place_the_aircraft() {
     let w = World::new();
     let (rx, h) = (w.rx, w.h);
-    let sigma_s = 50e-9;
     let mut noise = <ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
-    let sites_at = |t: f64, noise: &mut ChaCha8Rng| {
-        let p = w.aircraft(t);
-        rx.map(|r| {
-            let toa = t
-                + crate::geo::ecef_distance(p, r) / C_AIR
-                + sigma_s * noise.sample::<f64, _>(StandardNormal);
-            (r, toa, sigma_s)
-        })
-    };
+    let sites_at = |t: f64, noise: &mut ChaCha8Rng| w.sites_at(t, 50e-9, noise);
     let cfg = SparseConfig { enabled: true, ..Default::default() };
     let mut s = SparseTrack::start(&cfg, &sites_at(0.0, &mut noise), None, 0.0, h, 1).unwrap();
     for k in 1..=60 {
