@@ -115,25 +115,6 @@ fn too_few_receivers_for_a_fix_still_give_an_honest_estimate() {
     }
 }
 
-/// The published sparse estimates' velocity error (m/s, RMS) against the
-/// truth's, from its positions half a second either side.
-fn velocity_rmse(lines: &[serde_json::Value], truth: &Truth) -> (usize, f64) {
-    let (mut n, mut sum) = (0, 0.0);
-    for v in lines.iter().filter(|v| v["sparse"] == true && v["source"] == "fused") {
-        let (hex, t) = (v["hex"].as_str().unwrap(), v["t"].as_f64().unwrap());
-        let (Some(a), Some(b)) = (truth.position(hex, t - 0.5), truth.position(hex, t + 0.5)) else {
-            continue;
-        };
-        let plane = fuse1090::track::plane::Plane::new(a.0, a.1, a.2);
-        let [e, n_] = plane.to_en(b.0, b.1);
-        let vel = &v["vel_enu"];
-        let (ve, vn) = (vel[0].as_f64().unwrap(), vel[1].as_f64().unwrap());
-        sum += (ve - e).powi(2) + (vn - n_).powi(2);
-        n += 1;
-    }
-    (n, (sum / n.max(1) as f64).sqrt())
-}
-
 /// With Comm-B track and turn reports (the fringe's aircraft answering
 /// ground radars' 4,0, 5,0 and 6,0 interrogations), each cloud takes its
 /// aircraft's velocity: without them a cloud's velocity is what the time
@@ -145,13 +126,13 @@ fn comm_b_velocities_give_the_clouds_their_aircrafts_velocity() {
     let (capture, truth) = common::simulated_with("fringe", 66, |s| s.commb = registers);
     let mut cfg = CoreConfig::default();
     cfg.track.sparse.handover_after = 0;
-    let (with, with_lines, stats) = run_with(&capture, &truth, &cfg);
+    let (with, _, stats) = run_with(&capture, &truth, &cfg);
     cfg.track.commb_velocity = false;
-    let (without, without_lines, _) = run_with(&capture, &truth, &cfg);
+    let (without, _, _) = run_with(&capture, &truth, &cfg);
     let row = |r: &Report| r.overall.iter().find(|x| x.source == "fused:sparse").cloned().expect("sparse");
     let (with_row, without_row) = (row(&with), row(&without));
-    let (n, with_v) = velocity_rmse(&with_lines, &truth);
-    let (_, without_v) = velocity_rmse(&without_lines, &truth);
+    let (n, with_v, without_v) =
+        (with_row.n, with_row.vel_rmse_ms.unwrap(), without_row.vel_rmse_ms.unwrap());
     println!(
         "the cloud alone, with Comm-B velocities: {n} estimates, {:.0} m, NEES {:.2}, velocity {with_v:.1} m/s; \
          without: {:.0} m, NEES {:.2}, velocity {without_v:.1} m/s; {stats:?}",

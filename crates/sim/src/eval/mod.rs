@@ -30,6 +30,8 @@ struct TruthPoint {
     lat: f64,
     lon: f64,
     alt: f64,
+    /// East and north velocity (m/s), where the truth gives it.
+    vel: Option<[f64; 2]>,
 }
 
 #[derive(Default)]
@@ -59,6 +61,7 @@ impl Truth {
                         lat: f("lat")?,
                         lon: f("lon")?,
                         alt: f("alt_m")?,
+                        vel: east_north(&v["vel_enu"]),
                     });
                 }
                 Some("spoof") => {
@@ -92,6 +95,7 @@ impl Truth {
             lat: a.lat + (b.lat - a.lat) * f,
             lon: a.lon + (b.lon - a.lon) * f,
             alt: a.alt + (b.alt - a.alt) * f,
+            vel: a.vel.zip(b.vel).map(|(u, w)| [u[0] + (w[0] - u[0]) * f, u[1] + (w[1] - u[1]) * f]),
         })
     }
 
@@ -119,6 +123,8 @@ struct Acc {
     times: Vec<f64>,
     h_err: Vec<f64>,
     v_err: Vec<f64>,
+    /// Horizontal velocity errors (m/s) of the records that give one.
+    vel_err: Vec<f64>,
     /// (time, NEES) of each estimate with a covariance.
     nees: Vec<(f64, f64)>,
     /// Horizontal Cramér-Rao variances (trace, m^2) of MLAT fixes.
@@ -177,6 +183,9 @@ pub struct Row {
     pub h_rmse_m: f64,
     pub h_p95_m: f64,
     pub v_rmse_m: Option<f64>,
+    /// Horizontal velocity (m/s) against the truth's, of the records that
+    /// give one (tracks; not fixes).
+    pub vel_rmse_ms: Option<f64>,
     pub nees: Option<f64>,
     pub nees_band: Option<[f64; 2]>,
     /// The same band from the spread of the NEES's sums per aircraft and
@@ -342,6 +351,7 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
         e.0.times.extend(acc.times);
         e.0.h_err.extend(acc.h_err);
         e.0.v_err.extend(acc.v_err);
+        e.0.vel_err.extend(acc.vel_err);
         e.0.nees.extend(acc.nees);
         e.0.crb.extend(acc.crb);
     }
@@ -365,6 +375,7 @@ pub fn evaluate_with(truth: &Truth, records: impl BufRead, geometry: Option<&Geo
             let o = overall.entry(key).or_default();
             o.acc.h_err.extend(&acc.h_err);
             o.acc.v_err.extend(&acc.v_err);
+            o.acc.vel_err.extend(&acc.vel_err);
             o.acc.nees.extend(&acc.nees);
             o.acc.crb.extend(&acc.crb);
             o.acc.batches.extend(&acc.batches);
@@ -463,6 +474,7 @@ fn row(
         h_rmse_m: rms(&acc.h_err),
         h_p95_m: p95(&acc.h_err),
         v_rmse_m: (!acc.v_err.is_empty()).then(|| rms(&acc.v_err)),
+        vel_rmse_ms: (!acc.vel_err.is_empty()).then(|| rms(&acc.vel_err)),
         nees: (!acc.nees.is_empty())
             .then(|| acc.nees.iter().map(|(_, x)| x).sum::<f64>() / acc.nees.len() as f64),
         nees_band: (!acc.nees.is_empty()).then(|| nees_band(acc.nees.len(), 2.0)),
@@ -490,6 +502,9 @@ impl Acc {
         if let Some(alt) = v["alt_m"].as_f64() {
             self.v_err.push(alt - tp.alt);
         }
+        if let (Some(vel), Some(truth)) = (east_north(&v["vel_enu"]), tp.vel) {
+            self.vel_err.push((vel[0] - truth[0]).hypot(vel[1] - truth[1]));
+        }
         if let (Some(g), Some(ids)) = (geometry, v["receivers"].as_array()) {
             let (pos, sig): (Vec<[f64; 3]>, Vec<f64>) =
                 ids.iter().filter_map(|id| g.receivers.get(id.as_str()?)).copied().unzip();
@@ -511,6 +526,11 @@ impl Acc {
     }
 }
 
+/// The east and north of a `vel_enu` array.
+fn east_north(v: &Value) -> Option<[f64; 2]> {
+    Some([v.get(0)?.as_f64()?, v.get(1)?.as_f64()?])
+}
+
 fn fmt_opt(v: Option<f64>, prec: usize) -> String {
     v.map_or("-".into(), |x| format!("{x:.prec$}"))
 }
@@ -518,7 +538,7 @@ fn fmt_opt(v: Option<f64>, prec: usize) -> String {
 impl std::fmt::Display for Report {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let header = format!(
-            "{:<18} {:>6} {:>8} {:>9} {:>8} {:>8} {:>7} {:>15} {:>15} {:>6} {:>6} {:>6} {:>5} {:>15}",
+            "{:<18} {:>6} {:>8} {:>9} {:>8} {:>8} {:>7} {:>15} {:>15} {:>6} {:>6} {:>6} {:>5} {:>15} {:>7}",
             "source",
             "hex",
             "n",
@@ -532,11 +552,12 @@ impl std::fmt::Display for Report {
             "cont1k",
             "breaks",
             "false",
-            "crb_m (ratio)"
+            "crb_m (ratio)",
+            "vel_ms"
         );
         let line = |r: &Row| {
             format!(
-                "{:<18} {:>6} {:>8} {:>9.2} {:>8.2} {:>8} {:>7} {:>15} {:>15} {:>6.3} {:>6.3} {:>6} {:>5} {:>15}",
+                "{:<18} {:>6} {:>8} {:>9.2} {:>8.2} {:>8} {:>7} {:>15} {:>15} {:>6.3} {:>6.3} {:>6} {:>5} {:>15} {:>7}",
                 r.source,
                 if r.hex == "all" { format!("{} ac", r.aircraft) } else { r.hex.clone() },
                 r.n,
@@ -553,7 +574,8 @@ impl std::fmt::Display for Report {
                 match (r.crb_m, r.crb_ratio) {
                     (Some(c), Some(k)) => format!("{c:.2} ({k:.2}x)"),
                     _ => "-".into(),
-                }
+                },
+                fmt_opt(r.vel_rmse_ms, 2)
             )
         };
         writeln!(f, "{header}")?;

@@ -82,3 +82,30 @@ fn errors_nees_and_continuity_against_a_known_offset() {
     assert!((row.continuity_1km - 1.0).abs() < 1e-9);
     assert_eq!(r.unknown_records, 1);
 }
+
+/// A track's velocity against the truth's (interpolated between its
+/// points); records without one, and a truth without one, count nothing.
+#[test]
+fn velocity_errors_against_the_truths_velocity() {
+    let mut text = String::new();
+    for k in 0..=10 {
+        text += &format!(
+            "{{\"type\":\"truth\",\"hex\":\"ABC123\",\"t\":{},\"lat\":45.0,\"lon\":5.0,\"alt_m\":1000.0,\
+             \"vel_enu\":[{},0.0,0.0]}}\n",
+            1000.0 + k as f64,
+            100.0 + k as f64 * 10.0
+        );
+    }
+    let truth = Truth::read(text.as_bytes()).unwrap();
+    // At 1004.5 the truth flies east at 145 m/s: reported 148 east, 4 north, 5 m/s off.
+    let rec = |vel: &str| {
+        format!("{{\"type\":\"track\",\"hex\":\"ABC123\",\"t\":1004.5,\"lat\":45.0,\"lon\":5.0{vel},\"source\":\"fused\"}}\n")
+    };
+    let recs = rec(",\"vel_enu\":[148.0,4.0,0.0]") + &rec("");
+    let row = evaluate(&truth, recs.as_bytes()).unwrap().overall[0].clone();
+    assert_eq!(row.n, 2);
+    assert!((row.vel_rmse_ms.unwrap() - 5.0).abs() < 1e-9, "{:?}", row.vel_rmse_ms);
+    let without = self::truth(100, 1e-4);
+    let row = evaluate(&without, rec(",\"vel_enu\":[148.0,4.0,0.0]").as_bytes()).unwrap().overall[0].clone();
+    assert_eq!(row.vel_rmse_ms, None);
+}
