@@ -10,7 +10,8 @@
 //! forgets all but the last few: the track is then surer of the aircraft
 //! than its estimate says. So each transmission counts it as often as the
 //! track's own memory holds transmissions, found from how sure the track
-//! already is along the measured differences ([`Persistent::memory`]).
+//! already is along the measured differences ([`Persistent::memory`]),
+//! direction by direction (two differences are rarely known alike).
 
 use super::*;
 use nalgebra::SMatrix;
@@ -83,7 +84,16 @@ impl Track {
 }
 
 /// `lin` with the sites' `persistent` errors added to its noise, each
-/// counted as often as the track's memory (at `prior`) holds transmissions.
+/// counted as often as the track's memory (at `prior`) holds transmissions,
+/// direction by direction: two differences are not known alike (where two
+/// hyperbolas cross at a shallow angle, one combination of them moves the
+/// aircraft far along the crossing and the other hardly at all), and a
+/// track remembers more transmissions along the one its process noise
+/// blurs less. Taken over both at once (their traces), the memory was the
+/// better known direction's, and the persistent error undercounted along
+/// the crossing. The directions are those the track's prior and the fresh
+/// noise differ most in (the prior's eigenvectors once the fresh noise is
+/// whitened); one difference has one.
 fn with_persistent<const M: usize>(
     lin: Linear<M>,
     prior: &Gaussian,
@@ -95,7 +105,109 @@ fn with_persistent<const M: usize>(
         |v: [f64; 3]| SMatrix::<f64, M, M>::from_fn(|i, j| v[0] + if i == j { v[i + 1] } else { 0.0 });
     let state = lin.h * prior.p * lin.h.transpose();
     let once = pattern(persistent.map(|p| p.var_s2 * c2));
-    let n = Persistent::memory(state.trace(), lin.r.trace(), once.trace());
-    let r = lin.r + pattern(persistent.map(|p| p.counted(n) * c2));
+    let counted = directions(&lin.r, &state).map_or_else(
+        // Not separable (a singular noise): the traces, as one direction.
+        || {
+            let n = Persistent::memory(state.trace(), lin.r.trace(), once.trace());
+            pattern(persistent.map(|p| p.counted(n) * c2))
+        },
+        |(t, t_inv, s)| {
+            // In the directions' basis the fresh noise is the identity.
+            let b = t * once * t.transpose();
+            let factor: [f64; M] = std::array::from_fn(|i| {
+                let n = Persistent::memory(s[i], 1.0, b[(i, i)]);
+                let c = t * pattern(persistent.map(|p| p.counted(n) * c2)) * t.transpose();
+                if b[(i, i)] > 0.0 {
+                    c[(i, i)] / b[(i, i)]
+                } else {
+                    1.0
+                }
+            });
+            let d = SMatrix::<f64, M, M>::from_fn(|i, j| b[(i, j)] * (factor[i] * factor[j]).sqrt());
+            t_inv * d * t_inv.transpose()
+        },
+    );
+    let r = lin.r + counted;
     lin.with_r(r)
+}
+
+/// The basis in which the fresh noise `r` is the identity and the prior
+/// `state` diagonal: the transform `t` (basis = t * differences), its
+/// inverse, and the prior's variances there.
+#[allow(clippy::type_complexity)]
+fn directions<const M: usize>(
+    r: &SMatrix<f64, M, M>,
+    state: &SMatrix<f64, M, M>,
+) -> Option<(SMatrix<f64, M, M>, SMatrix<f64, M, M>, [f64; M])> {
+    let l_inv = r.cholesky()?.l().try_inverse()?;
+    let (vectors, values) = symmetric_eigen(&(l_inv * state * l_inv.transpose()))?;
+    let t = vectors.transpose() * l_inv;
+    let t_inv = t.try_inverse()?;
+    Some((t, t_inv, values))
+}
+
+/// Eigenvectors (columns) and eigenvalues of a symmetric 1x1 or 2x2 matrix.
+#[allow(clippy::type_complexity)]
+fn symmetric_eigen<const M: usize>(a: &SMatrix<f64, M, M>) -> Option<(SMatrix<f64, M, M>, [f64; M])> {
+    match M {
+        1 => Some((SMatrix::identity(), std::array::from_fn(|_| a[(0, 0)]))),
+        2 => {
+            let (p, q, s) = (a[(0, 0)], a[(0, 1)], a[(1, 1)]);
+            let (mean, half) = ((p + s) / 2.0, ((p - s) / 2.0).hypot(q));
+            let values = [mean + half, mean - half];
+            // The first eigenvector at angle theta: tan 2 theta = 2q / (p - s).
+            let theta = 0.5 * (2.0 * q).atan2(p - s);
+            let (sn, cs) = theta.sin_cos();
+            let v = SMatrix::<f64, M, M>::from_fn(|i, j| match (i, j) {
+                (0, 0) | (1, 1) => cs,
+                (1, 0) => sn,
+                _ => -sn,
+            });
+            Some((v, std::array::from_fn(|i| values[i])))
+        }
+        _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Matrix2, Matrix6, SMatrix, Vector2, Vector6};
+
+    /// Two differences the track knows unalike (its prior along the first
+    /// half the fresh noise, along the second ten times it), with the
+    /// persistent error of the second and third sites alone: each direction
+    /// counts it as its own memory says, not as their traces' would.
+    #[test]
+    fn each_direction_counts_the_persistent_error_as_its_own_memory_holds() {
+        let (r, p) = (100.0, 20.0);
+        let c2 = crate::mlat::solver::C_AIR.powi(2);
+        let h = SMatrix::<f64, 2, 6>::from_fn(|i, j| (i == j) as u8 as f64);
+        let lin = Linear::new(h, Vector2::zeros(), Matrix2::identity() * r);
+        let prior = Gaussian {
+            x: Vector6::zeros(),
+            p: Matrix6::from_diagonal(&Vector6::new(0.5 * r, 10.0 * r, 1.0, 1.0, 1.0, 1.0)),
+        };
+        let site = |var_m2: f64| Persistent { var_s2: var_m2 / c2, shared_by: 1e6 };
+        let persistent = [site(0.0), site(p), site(p)];
+        let counted = with_persistent(lin, &prior, &persistent).r - Matrix2::identity() * r;
+        for (i, s) in [(0, 0.5 * r), (1, 10.0 * r)] {
+            let n = Persistent::memory(s, r, p);
+            assert!((counted[(i, i)] - n * p).abs() < 1e-6 * n * p, "{i}: {counted} against {}", n * p);
+        }
+        assert!(counted[(0, 1)].abs() < 1e-9, "{counted}");
+        // The well-known direction remembers many more transmissions.
+        assert!(counted[(0, 0)] > 4.0 * counted[(1, 1)], "{counted}");
+    }
+
+    #[test]
+    fn a_symmetric_two_by_two_has_its_eigenvectors() {
+        let a = Matrix2::new(5.0, 2.0, 2.0, 2.0);
+        let (v, values) = symmetric_eigen(&a).unwrap();
+        for (i, value) in values.iter().enumerate() {
+            let x = v.column(i).into_owned();
+            assert!((a * x - x * *value).norm() < 1e-12, "{i}: {x} {value}");
+        }
+        assert!(values[0] > values[1]);
+    }
 }
