@@ -99,6 +99,9 @@ fn with_persistent<const M: usize>(
     prior: &Gaussian,
     persistent: &[Persistent; 3],
 ) -> Linear<M> {
+    if persistent.iter().all(|p| p.var_s2 == 0.0) {
+        return lin;
+    }
     let c2 = crate::mlat::solver::C_AIR.powi(2);
     // The differences are against the first site: its error is in each.
     let pattern =
