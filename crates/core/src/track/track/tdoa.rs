@@ -89,9 +89,9 @@ impl Track {
 /// hyperbolas cross at a shallow angle, one combination of them moves the
 /// aircraft far along the crossing and the other hardly at all), and a
 /// track remembers more transmissions along the one its process noise
-/// blurs less. Taken over both at once (their traces), the memory was the
-/// better known direction's, and the persistent error undercounted along
-/// the crossing. The directions are those the track's prior and the fresh
+/// blurs less. Taken over both at once (their traces, which the widest
+/// direction fills), the memory was the shorter one, and the persistent
+/// error undercounted along the crossing. The directions are those the track's prior and the fresh
 /// noise differ most in (the prior's eigenvectors once the fresh noise is
 /// whitened); one difference has one.
 fn with_persistent<const M: usize>(
