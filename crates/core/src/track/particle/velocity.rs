@@ -106,7 +106,9 @@ impl SparseTrack {
         let n = self.x.len() as f64;
         let floor = cfg.resample_below * n;
         if self.ess() < floor {
+            // New particles: the costs are theirs to be weighed by.
             self.resample(&d, h);
+            cost = self.velocity_cost(v_en, &info);
         }
         let (mut left, mut steps) = (1.0, 0);
         while left > 0.0 {
