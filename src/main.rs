@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 use fuse1090::cmd;
 use fuse1090::feed::capture::ClockKind;
 use fuse1090::feed::InputFormat;
+use fuse1090::fuse::Method;
 
 /// mimalloc, not the system's: its per-thread heaps take the stages' frees
 /// of each other's buffers cheaply, and it backs them with huge pages (the
@@ -64,9 +65,18 @@ enum Command {
         truth: Option<PathBuf>,
         #[arg(long, required_unless_present = "seeds")]
         tracks: Option<PathBuf>,
-        /// Monte Carlo: simulate the scenario under seeds 1..=N.
+        /// Monte Carlo: simulate the scenario under N seeds (1..=N unless
+        /// --first-seed says otherwise).
         #[arg(long, requires = "scenario")]
         seeds: Option<u64>,
+        /// Monte Carlo: the first of the N seeds, so that seeds a scenario was
+        /// tuned on can be left out.
+        #[arg(long, requires = "seeds", default_value_t = 1)]
+        first_seed: u64,
+        /// Monte Carlo: only this fusion method (every one by default); the
+        /// single-source rows (MLAT fixes and tracks, ADS-B tracks) come with it.
+        #[arg(long, requires = "seeds")]
+        method: Option<Method>,
         /// Configuration for the Monte Carlo runs.
         #[arg(long, requires = "seeds")]
         config: Option<PathBuf>,
@@ -127,11 +137,21 @@ fn main() -> ExitCode {
         Command::Replay { capture, config, speed } => cmd::replay::run(&capture, &config, speed),
         Command::CheckConfig { file } => cmd::check_config(&file),
         Command::UnitLimits { file, allow } => cmd::unit_limits::run(&file, &allow),
-        Command::Eval { truth, tracks, scenario, seeds, config, json } => match (seeds, truth, tracks) {
-            (Some(n), _, _) => cmd::eval::monte_carlo(scenario.as_deref(), n, config.as_deref(), json),
-            (None, Some(truth), Some(tracks)) => cmd::eval::run(&truth, &tracks, scenario.as_deref(), json),
-            _ => Err(anyhow::anyhow!("eval needs --truth and --tracks, or --scenario and --seeds")),
-        },
+        Command::Eval { truth, tracks, scenario, seeds, first_seed, method, config, json } => {
+            match (seeds, truth, tracks) {
+                (Some(n), _, _) => cmd::eval::monte_carlo(cmd::eval::MonteCarloArgs {
+                    scenario: scenario.as_deref(),
+                    seeds: first_seed..first_seed.saturating_add(n),
+                    method,
+                    config: config.as_deref(),
+                    json,
+                }),
+                (None, Some(truth), Some(tracks)) => {
+                    cmd::eval::run(&truth, &tracks, scenario.as_deref(), json)
+                }
+                _ => Err(anyhow::anyhow!("eval needs --truth and --tracks, or --scenario and --seeds")),
+            }
+        }
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

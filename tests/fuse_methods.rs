@@ -156,3 +156,36 @@ fn the_benchmark_model_set_stays_near_the_papers_figure() {
     let (nees, band) = (t.nees.unwrap(), t.nees_band.unwrap());
     assert!(band[0] <= nees && nees <= band[1], "{t:?}");
 }
+
+/// `eval --seeds N --first-seed S --method M` as a user runs it (the real
+/// binary): seeds S..S+N with that method alone, the same pooled figures
+/// as the library's Monte Carlo over those seeds and not those of seeds 1..=N.
+#[test]
+fn eval_runs_the_seeds_and_the_method_it_is_given() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_fuse1090"))
+        .args(["eval", "--scenario"])
+        .arg(root.join("fixtures/scenarios/fusion-8seg-1hz.toml"))
+        .args(["--seeds", "2", "--first-seed", "5", "--method", "ci", "--json"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let rows: Vec<serde_json::Value> = serde_json::from_slice(&out.stdout).unwrap();
+    let fused: Vec<&str> =
+        rows.iter().filter_map(|r| r["source"].as_str()).filter(|s| s.starts_with("fused")).collect();
+    assert_eq!(fused, ["fused/ci"]);
+    let cli = rows.iter().find(|r| r["source"] == "fused/ci").unwrap();
+    assert_eq!(cli["seeds"], 2);
+    let these = runs("fusion-8seg-1hz", None, &[Method::Ci], 5..7);
+    let first = runs("fusion-8seg-1hz", None, &[Method::Ci], 1..3);
+    let rmse = |rows: &[McRow]| row(rows, "fused/ci").h_rmse_m;
+    assert!((cli["h_rmse_m"].as_f64().unwrap() - rmse(&these)).abs() < 1e-9);
+    assert!((rmse(&these) - rmse(&first)).abs() > 1e-6);
+    // A method that does not exist is the operator's mistake, said as such.
+    let bad = std::process::Command::new(env!("CARGO_BIN_EXE_fuse1090"))
+        .args(["eval", "--scenario", "x.toml", "--seeds", "2", "--method", "average"])
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("unknown fusion method \"average\""));
+}

@@ -7,6 +7,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 
 use crate::eval::{evaluate_with, Geometry, Truth};
+use crate::fuse::Method;
 use crate::mlat::MlatConfig;
 use crate::sim::scenario::Scenario;
 
@@ -24,15 +25,29 @@ pub fn run(truth: &Path, tracks: &Path, scenario: Option<&Path>, json: bool) -> 
     super::print_stdout(&text)
 }
 
-/// `eval --scenario FILE --seeds N [--config FILE]`: every fusion method over N seeds.
-pub fn monte_carlo(scenario: Option<&Path>, seeds: u64, config: Option<&Path>, json: bool) -> Result<()> {
-    let scenario = Scenario::load(scenario.context("--seeds needs --scenario")?)?;
-    let cfg = match config {
+/// `eval --scenario FILE --seeds N [--first-seed S] [--method M] [--config FILE]`.
+pub struct MonteCarloArgs<'a> {
+    pub scenario: Option<&'a Path>,
+    pub seeds: std::ops::Range<u64>,
+    /// One fusion method, or all of them.
+    pub method: Option<Method>,
+    pub config: Option<&'a Path>,
+    pub json: bool,
+}
+
+/// The fusion methods (or one) over the seeds.
+pub fn monte_carlo(args: MonteCarloArgs) -> Result<()> {
+    let scenario = Scenario::load(args.scenario.context("--seeds needs --scenario")?)?;
+    let cfg = match args.config {
         Some(p) => crate::config::Config::load(p)?,
         None => crate::config::Config::default(),
     };
-    let rows =
-        crate::eval::montecarlo::monte_carlo(&scenario, &cfg.core, &crate::fuse::Method::ALL, 1..seeds + 1)?;
+    let methods = match args.method {
+        Some(m) => vec![m],
+        None => Method::ALL.to_vec(),
+    };
+    let rows = crate::eval::montecarlo::monte_carlo(&scenario, &cfg.core, &methods, args.seeds)?;
+    let json = args.json;
     let text = if json {
         serde_json::to_string_pretty(&rows)? + "\n"
     } else {

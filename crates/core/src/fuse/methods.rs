@@ -51,6 +51,16 @@ impl Method {
     }
 }
 
+impl std::str::FromStr for Method {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Method::ALL.into_iter().find(|m| m.name() == s).ok_or_else(|| {
+            let names: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
+            format!("unknown fusion method {s:?} (expected one of {})", names.join(", "))
+        })
+    }
+}
+
 /// Cross-covariance of the two tracks' errors (ADS-B x MLAT), by the
 /// recursion `P12 <- (I - K1 H) (F P12 F' + Q) (I - K2 H)'`, where each
 /// track's `I - K H` is its posterior covariance times its prior's inverse
