@@ -6,7 +6,7 @@
 //! overconfidence.
 
 use fuse1090::config::Config;
-use fuse1090::eval::montecarlo::{monte_carlo, McRow};
+use fuse1090::eval::montecarlo::{monte_carlo, McRow, RunConfig};
 use fuse1090::fuse::Method;
 use fuse1090::sim::scenario::Scenario;
 
@@ -19,7 +19,8 @@ fn runs(scenario: &str, config: Option<&str>, methods: &[Method], seeds: std::op
         Some(c) => Config::load(&root.join(format!("fixtures/configs/{c}.toml"))).unwrap(),
         None => Config::default(),
     };
-    let rows = monte_carlo(&s, &cfg.core, methods, seeds).unwrap();
+    let known: Vec<_> = cfg.receiver.iter().map(|r| r.known()).collect();
+    let rows = monte_carlo(&s, RunConfig { core: &cfg.core, known: &known }, methods, seeds).unwrap();
     eprintln!("{}", fuse1090::eval::montecarlo::table(&rows));
     rows
 }
@@ -181,6 +182,26 @@ fn eval_runs_the_seeds_and_the_method_it_is_given() {
     let rmse = |rows: &[McRow]| row(rows, "fused/ci").h_rmse_m;
     assert!((cli["h_rmse_m"].as_f64().unwrap() - rmse(&these)).abs() < 1e-9);
     assert!((rmse(&these) - rmse(&first)).abs() > 1e-6);
+    // Receivers described by the configuration (here the oracle `sim`
+    // writes: every receiver's true timing) are known to every run, as
+    // `run --config` makes them known: the fixes are no longer those of
+    // receivers whose timing is learnt.
+    let dir = tempfile::tempdir().unwrap();
+    let sim = std::process::Command::new(env!("CARGO_BIN_EXE_fuse1090"))
+        .args(["sim", "--scenario"])
+        .arg(root.join("fixtures/scenarios/fusion-8seg-1hz.toml"))
+        .arg("--out")
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(sim.status.success(), "{}", String::from_utf8_lossy(&sim.stderr));
+    let oracle = fuse1090::config::Config::load(&dir.path().join("oracle.toml")).unwrap();
+    assert!(oracle.receiver.iter().all(|r| r.known().timing.is_some()));
+    let known: Vec<_> = oracle.receiver.iter().map(|r| r.known()).collect();
+    let s = Scenario::load(&root.join("fixtures/scenarios/fusion-8seg-1hz.toml")).unwrap();
+    let told = monte_carlo(&s, RunConfig { core: &oracle.core, known: &known }, &[Method::Ci], 5..7).unwrap();
+    let fix_nees = |rows: &[McRow]| row(rows, "mlat-fix").nees.unwrap();
+    assert!((fix_nees(&told) - fix_nees(&these)).abs() > 1e-6, "{} {}", fix_nees(&told), fix_nees(&these));
     // A method that does not exist is the operator's mistake, said as such.
     let bad = std::process::Command::new(env!("CARGO_BIN_EXE_fuse1090"))
         .args(["eval", "--scenario", "x.toml", "--seeds", "2", "--method", "average"])

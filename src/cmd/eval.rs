@@ -46,7 +46,11 @@ pub fn monte_carlo(args: MonteCarloArgs) -> Result<()> {
         Some(m) => vec![m],
         None => Method::ALL.to_vec(),
     };
-    let rows = crate::eval::montecarlo::monte_carlo(&scenario, &cfg.core, &methods, args.seeds)?;
+    // Receivers the configuration describes (an oracle's timing, say) are
+    // known to every run, as `run --config` makes them known.
+    let known: Vec<_> = cfg.receiver.iter().map(|r| r.known()).collect();
+    let run = crate::eval::montecarlo::RunConfig { core: &cfg.core, known: &known };
+    let rows = crate::eval::montecarlo::monte_carlo(&scenario, run, &methods, args.seeds)?;
     let json = args.json;
     let text = if json {
         serde_json::to_string_pretty(&rows)? + "\n"

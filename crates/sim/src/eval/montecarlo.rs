@@ -27,6 +27,7 @@ use statrs::distribution::{ContinuousCDF, StudentsT};
 
 use super::{evaluate, nees_band, Truth};
 use crate::sim::scenario::Scenario;
+use fuse1090_core::core::front::KnownReceiver;
 use fuse1090_core::core::{Core, CoreConfig};
 use fuse1090_core::feed::capture::CaptureReader;
 use fuse1090_core::fuse::Method;
@@ -71,8 +72,16 @@ struct Acc {
 
 /// Runs the core over a capture held in memory; the event stream as JSON lines.
 pub fn run_in_memory(capture: &[u8], cfg: &CoreConfig) -> Result<Vec<u8>> {
+    run_in_memory_knowing(capture, cfg, &[])
+}
+
+/// [`run_in_memory`] with receivers described by the configuration
+/// (`[[receiver]]`: their positions and, where given, their timing), as
+/// `run --capture` takes them.
+pub fn run_in_memory_knowing(capture: &[u8], cfg: &CoreConfig, known: &[KnownReceiver]) -> Result<Vec<u8>> {
     let mut reader = CaptureReader::new(capture, "capture");
     let mut core = Core::new(cfg);
+    core.know(known.to_vec());
     let mut out = Vec::new();
     let mut write = |core: &mut Core| {
         while let Some(ev) = core.poll_event() {
@@ -88,7 +97,15 @@ pub fn run_in_memory(capture: &[u8], cfg: &CoreConfig) -> Result<Vec<u8>> {
     Ok(out)
 }
 
-fn one_seed(scenario: &Scenario, cfg: &CoreConfig, methods: &[Method], seed: u64) -> Result<Vec<SeedRow>> {
+/// What every run of a Monte Carlo is given: the core's configuration and
+/// the receivers the configuration describes.
+#[derive(Clone, Copy)]
+pub struct RunConfig<'a> {
+    pub core: &'a CoreConfig,
+    pub known: &'a [KnownReceiver],
+}
+
+fn one_seed(scenario: &Scenario, cfg: RunConfig, methods: &[Method], seed: u64) -> Result<Vec<SeedRow>> {
     let mut s = scenario.clone();
     s.seed = seed;
     let (mut capture, mut truth_text) = (Vec::new(), Vec::new());
@@ -96,11 +113,11 @@ fn one_seed(scenario: &Scenario, cfg: &CoreConfig, methods: &[Method], seed: u64
     let truth = Truth::read(truth_text.as_slice())?;
     let mut rows = Vec::new();
     for (k, &method) in methods.iter().enumerate() {
-        let mut c = cfg.clone();
+        let mut c = cfg.core.clone();
         c.fuse.method = method;
         // Single-source rows once: they do not depend on the method.
         c.publish_source_tracks = k == 0;
-        let stream = run_in_memory(&capture, &c)?;
+        let stream = run_in_memory_knowing(&capture, &c, cfg.known)?;
         let report = evaluate(&truth, stream.as_slice())?;
         for r in report.overall {
             if k > 0 && r.source != "fused" {
@@ -130,7 +147,7 @@ fn one_seed(scenario: &Scenario, cfg: &CoreConfig, methods: &[Method], seed: u64
 /// Pools `seeds` runs of the scenario for each method.
 pub fn monte_carlo(
     scenario: &Scenario,
-    cfg: &CoreConfig,
+    cfg: RunConfig,
     methods: &[Method],
     seeds: std::ops::Range<u64>,
 ) -> Result<Vec<McRow>> {
