@@ -209,4 +209,10 @@ fn eval_runs_the_seeds_and_the_method_it_is_given() {
         .unwrap();
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("unknown fusion method \"average\""));
+    let none = std::process::Command::new(env!("CARGO_BIN_EXE_fuse1090"))
+        .args(["eval", "--scenario", "x.toml", "--seeds", "0"])
+        .output()
+        .unwrap();
+    assert!(!none.status.success());
+    assert!(String::from_utf8_lossy(&none.stderr).contains("--seeds must be at least 1"));
 }

@@ -37,6 +37,7 @@ pub struct MonteCarloArgs<'a> {
 
 /// The fusion methods (or one) over the seeds.
 pub fn monte_carlo(args: MonteCarloArgs) -> Result<()> {
+    anyhow::ensure!(!args.seeds.is_empty(), "--seeds must be at least 1");
     let scenario = Scenario::load(args.scenario.context("--seeds needs --scenario")?)?;
     let cfg = match args.config {
         Some(p) => crate::config::Config::load(p)?,
