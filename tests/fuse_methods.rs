@@ -25,6 +25,11 @@ fn runs(scenario: &str, config: Option<&str>, methods: &[Method], seeds: std::op
     rows
 }
 
+/// The real binary, as a user runs it.
+fn fuse1090() -> std::process::Command {
+    std::process::Command::new(env!("CARGO_BIN_EXE_fuse1090"))
+}
+
 fn row<'a>(rows: &'a [McRow], source: &str) -> &'a McRow {
     rows.iter().find(|r| r.source == source).unwrap_or_else(|| panic!("no {source} row"))
 }
@@ -164,7 +169,7 @@ fn the_benchmark_model_set_stays_near_the_papers_figure() {
 #[test]
 fn eval_runs_the_seeds_and_the_method_it_is_given() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_fuse1090"))
+    let out = fuse1090()
         .args(["eval", "--scenario"])
         .arg(root.join("fixtures/scenarios/fusion-8seg-1hz.toml"))
         .args(["--seeds", "2", "--first-seed", "5", "--method", "ci", "--json"])
@@ -187,7 +192,7 @@ fn eval_runs_the_seeds_and_the_method_it_is_given() {
     // `run --config` makes them known: the fixes are no longer those of
     // receivers whose timing is learnt.
     let dir = tempfile::tempdir().unwrap();
-    let sim = std::process::Command::new(env!("CARGO_BIN_EXE_fuse1090"))
+    let sim = fuse1090()
         .args(["sim", "--scenario"])
         .arg(root.join("fixtures/scenarios/fusion-8seg-1hz.toml"))
         .arg("--out")
@@ -203,16 +208,13 @@ fn eval_runs_the_seeds_and_the_method_it_is_given() {
     let fix_nees = |rows: &[McRow]| row(rows, "mlat-fix").nees.unwrap();
     assert!((fix_nees(&told) - fix_nees(&these)).abs() > 1e-6, "{} {}", fix_nees(&told), fix_nees(&these));
     // A method that does not exist is the operator's mistake, said as such.
-    let bad = std::process::Command::new(env!("CARGO_BIN_EXE_fuse1090"))
+    let bad = fuse1090()
         .args(["eval", "--scenario", "x.toml", "--seeds", "2", "--method", "average"])
         .output()
         .unwrap();
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("unknown fusion method \"average\""));
-    let none = std::process::Command::new(env!("CARGO_BIN_EXE_fuse1090"))
-        .args(["eval", "--scenario", "x.toml", "--seeds", "0"])
-        .output()
-        .unwrap();
+    let none = fuse1090().args(["eval", "--scenario", "x.toml", "--seeds", "0"]).output().unwrap();
     assert!(!none.status.success());
     assert!(String::from_utf8_lossy(&none.stderr).contains("--seeds must be at least 1"));
 }
