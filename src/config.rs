@@ -30,6 +30,12 @@ pub struct Config {
 }
 
 impl Config {
+    /// The receivers the configuration describes, as the core is told them
+    /// ([`crate::core::Core::know`]): `run --config` and every Monte Carlo run.
+    pub fn known_receivers(&self) -> Vec<crate::core::front::KnownReceiver> {
+        self.receiver.iter().map(|r| r.known()).collect()
+    }
+
     pub fn load(path: &Path) -> Result<Config, ConfigError> {
         let file = path.display().to_string();
         let text = std::fs::read_to_string(path)

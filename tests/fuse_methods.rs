@@ -19,7 +19,7 @@ fn runs(scenario: &str, config: Option<&str>, methods: &[Method], seeds: std::op
         Some(c) => Config::load(&root.join(format!("fixtures/configs/{c}.toml"))).unwrap(),
         None => Config::default(),
     };
-    let known: Vec<_> = cfg.receiver.iter().map(|r| r.known()).collect();
+    let known = cfg.known_receivers();
     let rows = monte_carlo(&s, RunConfig { core: &cfg.core, known: &known }, methods, seeds).unwrap();
     eprintln!("{}", fuse1090::eval::montecarlo::table(&rows));
     rows
@@ -202,7 +202,7 @@ fn eval_runs_the_seeds_and_the_method_it_is_given() {
     assert!(sim.status.success(), "{}", String::from_utf8_lossy(&sim.stderr));
     let oracle = fuse1090::config::Config::load(&dir.path().join("oracle.toml")).unwrap();
     assert!(oracle.receiver.iter().all(|r| r.known().timing.is_some()));
-    let known: Vec<_> = oracle.receiver.iter().map(|r| r.known()).collect();
+    let known = oracle.known_receivers();
     let s = Scenario::load(&root.join("fixtures/scenarios/fusion-8seg-1hz.toml")).unwrap();
     let told = monte_carlo(&s, RunConfig { core: &oracle.core, known: &known }, &[Method::Ci], 5..7).unwrap();
     let fix_nees = |rows: &[McRow]| row(rows, "mlat-fix").nees.unwrap();

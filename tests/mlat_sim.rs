@@ -485,7 +485,7 @@ fn self_survey_puts_the_misplaced_receiver_where_it_is_and_learning_nears_the_or
     assert_eq!(oracle.receiver.len(), truth.receivers.len());
     assert!(oracle.receiver.iter().all(|r| r.timing.is_some()));
     let ((declared, _), (surveyed, nees)) = (run(false, Vec::new()), run(true, Vec::new()));
-    let (known, _) = run(false, oracle.receiver.iter().map(|r| r.known()).collect());
+    let (known, _) = run(false, oracle.known_receivers());
     eprintln!(
         "fixes' median error: {declared:.1} m declared, {surveyed:.1} m surveyed (NEES {nees:.2}), {known:.1} m oracle"
     );

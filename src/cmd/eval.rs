@@ -49,11 +49,10 @@ pub fn monte_carlo(args: MonteCarloArgs) -> Result<()> {
     };
     // Receivers the configuration describes (an oracle's timing, say) are
     // known to every run, as `run --config` makes them known.
-    let known: Vec<_> = cfg.receiver.iter().map(|r| r.known()).collect();
+    let known = cfg.known_receivers();
     let run = crate::eval::montecarlo::RunConfig { core: &cfg.core, known: &known };
     let rows = crate::eval::montecarlo::monte_carlo(&scenario, run, &methods, args.seeds)?;
-    let json = args.json;
-    let text = if json {
+    let text = if args.json {
         serde_json::to_string_pretty(&rows)? + "\n"
     } else {
         crate::eval::montecarlo::table(&rows)

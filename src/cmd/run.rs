@@ -207,7 +207,7 @@ pub fn run_capture(cfg: &Config, capture: &Path, output: &Path) -> Result<Summar
     let mut core_cfg = cfg.core.clone();
     core_cfg.publish_source_tracks = cfg.publish_source_tracks;
     let (mut front, back) = Core::stages(&core_cfg);
-    front.know(cfg.receiver.iter().map(|r| r.known()).collect());
+    front.know(cfg.known_receivers());
     let sink = FileSink {
         out: BufWriter::with_capacity(1 << 20, out_file),
         names: front.receiver_names(),
