@@ -152,7 +152,7 @@ fn series(front: &FrontSnapshot, back: &Back, reg: &Registry, r: &mut Vec<Readin
         ("restarted", sp.restarts),
         ("handed_over_at_a_fix", sp.handed_over),
         ("handed_over_at_one_mode", sp.handed_over_one_mode),
-        ("given_back", sp.given_back + sp.mirrored),
+        ("given_back", sp.given_back + sp.mirrored + sp.spread),
     ] {
         r.push(Reading::labelled("fuse1090_sparse_filters_total", ("event", what.to_string()), n));
     }

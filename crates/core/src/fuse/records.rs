@@ -131,6 +131,9 @@ pub struct SparseStats {
     /// Tracks taken over from a cloud for which a transmission had another
     /// solution that who heard it did not rule out: dropped for a new cloud.
     pub mirrored: u64,
+    /// Tracks taken over from a cloud that their time differences alone no
+    /// longer held within `publish_sigma_m`: dropped for a new cloud.
+    pub spread: u64,
     /// Aircraft not given a filter: as many as `max_filters` were running.
     pub refused: u64,
     /// Velocity reports (Comm-B) the clouds took.
@@ -175,7 +178,7 @@ impl std::fmt::Display for FuseStats {
                 f,
                 "; sparse geometry: {} particle filters ({} refused, table full), {} updates, {} restarts, \
                  {} velocity reports ({} contradicting, left out, {} confirming a change), {} published, {} handed over at a fix, {} at one mode \
-                 ({} given back, {} for a mirror), {} groups without a height",
+                 ({} given back, {} for a mirror, {} for their spread), {} groups without a height",
                 s.started,
                 s.refused,
                 s.updates,
@@ -188,6 +191,7 @@ impl std::fmt::Display for FuseStats {
                 s.handed_over_one_mode,
                 s.given_back,
                 s.mirrored,
+                s.spread,
                 s.no_height
             )?;
         }

@@ -139,7 +139,25 @@ impl Fuser {
             (Observation::Position { .. }, Outcome::Applied { .. } | Outcome::Restarted) => {
                 a.sparse_geometry = false;
             }
-            (Observation::Tdoa { .. }, Outcome::Applied { .. }) => a.sparse_gated = 0,
+            (Observation::Tdoa { .. }, Outcome::Applied { .. }) => {
+                a.sparse_gated = 0;
+                // Time differences alone hold a handed-over track only as
+                // well as a cloud would have to be to be published: past
+                // that, its Gaussian is a straight slice of a curved sheet
+                // (where along a hyperbola the aircraft is, only its motion
+                // says), and the cloud, which takes who heard it, is the
+                // better judge.
+                let limit = self.tcfg.sparse.publish_sigma_m;
+                let spread = a.fused.estimate_at(m.t).map_or(0.0, |e| largest_sigma_m(&e.state.p));
+                if spread > limit {
+                    self.give_back(
+                        addr,
+                        "its time differences alone no longer held it within the publication limit",
+                    );
+                    self.stats.sparse.spread += 1;
+                    return true;
+                }
+            }
             (Observation::Tdoa { .. }, Outcome::Gated) => {
                 a.sparse_gated += 1;
                 if a.sparse_gated >= self.tcfg.max_gated_in_a_row {
@@ -203,4 +221,10 @@ impl Fuser {
         a.sparse_since = Some(f64::NEG_INFINITY);
         tracing::info!(hex = format!("{addr:06X}"), "tracks started from a particle cloud given back: {why}");
     }
+}
+
+/// The largest horizontal standard deviation of a track's state (m).
+fn largest_sigma_m(p: &nalgebra::Matrix6<f64>) -> f64 {
+    let (a, b, c) = (p[(0, 0)], p[(0, 1)], p[(1, 1)]);
+    (0.5 * (a + c) + (0.25 * (a - c).powi(2) + b * b).sqrt()).max(0.0).sqrt()
 }

@@ -464,6 +464,51 @@ fn a_one_peaked_cloud_hands_over_and_a_wrong_start_is_given_back() {
     assert_eq!((s.given_back, s.mirrored), (1, 0), "{s:?}");
 }
 
+/// Tracks started from a cloud, then heard by two receivers only while the
+/// aircraft turns (2 degrees a second, left, from the test flight's heading
+/// east): one time difference places it on a curve, and where along it
+/// only the track's motion says. Its published estimates stay within
+/// their covariance, which grows with what a turn could have done unseen,
+/// and once that is wider than a cloud may be to be published, the
+/// aircraft goes back to a cloud. (Before, the track flew on straight,
+/// kilometres off, with a covariance of a few hundred metres.)
+#[test]
+fn a_track_one_time_difference_cannot_hold_goes_back_to_a_cloud() {
+    let mut f = sparse_fuser();
+    let mut out = Vec::new();
+    let mut t = until_handed_over(&mut f, 1, 1, 99.0, &mut out);
+    let (t0, rate) = (t, 2f64.to_radians());
+    let radius = 200.0 / rate;
+    let turning = |t: f64| {
+        let a = rate * (t - t0);
+        let (e, n) = (200.0 * (t0 - 100.0) + radius * a.sin(), radius * (1.0 - a.cos()));
+        crate::geo::displace(45.0, 5.0, 3000.0, [e, n, 0.0])
+    };
+    let two = [[0.0, 30_000.0], [26_000.0, -15_000.0], [26_000.0, -15_000.0]];
+    out.clear();
+    let mut worst: f64 = 0.0;
+    while t < t0 + 90.0 && f.stats().sparse.spread == 0 {
+        f.on_measurement(1, None, height(t), t, &mut out);
+        let mut g = tdoa_at_sites(1, t, turning(t), two);
+        g.sites.truncate(2);
+        g.persistent.truncate(2);
+        f.on_tdoa(&g, t, &mut out);
+        f.advance(t, &mut out);
+        for o in out.drain(..) {
+            let Output::Track(r) = o else { continue };
+            let (lat, lon, h) = turning(r.est.t);
+            let x = r.est.plane.ecef_to_local(crate::geo::geodetic_to_ecef(lat, lon, h));
+            let d = nalgebra::Vector2::new(x[0] - r.est.state.x[0], x[1] - r.est.state.x[1]);
+            let p = r.est.state.p.fixed_view::<2, 2>(0, 0).into_owned();
+            worst = worst.max((d.transpose() * p.try_inverse().unwrap() * d)[0]);
+        }
+        t += 0.5;
+    }
+    let s = f.stats().sparse;
+    assert_eq!((s.spread, s.given_back, s.mirrored), (1, 0, 0), "{s:?} at {:.0} s", t - t0);
+    assert!(worst < 20.0, "worst NEES {worst:.1}");
+}
+
 /// Tracks started from a cloud, then heard by three receivers in a line: a
 /// transmission's second solution, mirrored across the line, that nothing
 /// rules out (no coverage known) sends the aircraft back to a cloud, and

@@ -330,6 +330,16 @@ impl TrackConfig {
         }
     }
 
+    /// The largest turn rate of the models (rad/s): their coordinated
+    /// turns', or a standard-rate turn's (3 degrees a second) without any.
+    pub fn largest_turn_rps(&self) -> f64 {
+        let turns = self.models.iter().filter_map(|m| match m {
+            ModelConfig::Ct { turn_dps, .. } => Some(turn_dps.abs()),
+            _ => None,
+        });
+        turns.fold(None, |a: Option<f64>, b| Some(a.map_or(b, |a| a.max(b)))).unwrap_or(3.0).to_radians()
+    }
+
     /// The output period for a NACp (s).
     pub fn period_s(&self, nac_p: Option<u8>) -> f64 {
         match nac_p {

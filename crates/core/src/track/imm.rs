@@ -303,6 +303,15 @@ impl Prepared {
     pub fn combined(&self) -> Gaussian {
         self.combined
     }
+
+    /// Every model's prediction, and so the combined one, less sure by `q`:
+    /// process noise the models do not have, the same for all.
+    pub fn widen(&mut self, q: &Matrix6<f64>) {
+        for g in self.predicted.iter_mut() {
+            g.p += q;
+        }
+        self.combined.p += q;
+    }
 }
 
 /// Gaussian mixture moment-matched to one Gaussian.

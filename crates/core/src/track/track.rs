@@ -71,6 +71,11 @@ struct State {
     gated_in_a_row: u32,
     /// Positions accepted since the horizontal filter (re)started.
     accepted_since_start: u32,
+    /// While the track knows the aircraft from time differences alone
+    /// (started from a particle cloud, no position since): when its
+    /// horizontal position was last measured whole, at the handover or by
+    /// two time differences (see `track/tdoa.rs`).
+    seen_whole_t: Option<f64>,
 }
 
 /// `I - K H` of an update: the posterior covariance times the prior's inverse.
@@ -156,6 +161,7 @@ impl Track {
                 nominal: [None; 2],
                 gated_in_a_row: 0,
                 accepted_since_start: 0,
+                seen_whole_t: None,
             },
             cfg,
             history: VecDeque::new(),

@@ -66,6 +66,7 @@ impl Track {
         }
         self.state.gated_in_a_row = 0;
         self.state.accepted_since_start += 1;
+        self.state.seen_whole_t = None;
         // Outliers the track outlived were the noise's; those before a
         // restart that cured the gating, the track's.
         let cured = self.state.accepted_since_start >= self.cfg.max_gated_in_a_row;
@@ -166,6 +167,7 @@ impl Track {
         self.state.imm = Some(Imm::with_spec(spec, Gaussian { x: Vector6::zeros(), p }));
         self.state.gated_in_a_row = 0;
         self.state.accepted_since_start = 0;
+        self.state.seen_whole_t = None;
         for noise in &mut self.state.noise {
             noise.covered_now();
         }
@@ -189,6 +191,7 @@ impl Track {
         self.state.t_h = t;
         self.state.gated_in_a_row = 0;
         self.state.accepted_since_start = 0;
+        self.state.seen_whole_t = Some(t);
         for noise in &mut self.state.noise {
             noise.covered_now();
         }

@@ -14,7 +14,7 @@
 //! direction by direction (two differences are rarely known alike).
 
 use super::*;
-use nalgebra::SMatrix;
+use nalgebra::{Matrix6, SMatrix};
 
 impl Track {
     /// Time differences straight into the track (augmented UKF), with the
@@ -47,7 +47,10 @@ impl Track {
         };
         let (h, hv) = (v.x[0], v.p[(0, 0)]);
         let up = |e: f64, n: f64, h: f64| plane.up_at(e, n, h);
-        let prep = imm.prepare(dt);
+        let mut prep = imm.prepare(dt);
+        if let Some(seen) = self.state.seen_whole_t {
+            prep.widen(&unseen_turn(&prep.combined(), t - seen, dt, self.cfg.largest_turn_rps()));
+        }
         // One unscented transform at the combined prediction, as a linear
         // regression every model applies (see `ukf`).
         let combined = prep.combined();
@@ -63,7 +66,12 @@ impl Track {
                 .and_then(|lin| Self::gated_update(imm, &prep, &lin, gate)),
         };
         match step {
-            Some(nis) => Outcome::Applied { nis },
+            Some(nis) => {
+                if sites.len() == 3 && self.state.seen_whole_t.is_some() {
+                    self.state.seen_whole_t = Some(t);
+                }
+                Outcome::Applied { nis }
+            }
             None => Outcome::Gated,
         }
     }
@@ -81,6 +89,37 @@ impl Track {
         }
         imm.update(prep, m).map(|s| s.nis)
     }
+}
+
+/// What the aircraft may have done unseen: one time difference places it
+/// on a curve, and where along the curve only the track's motion models
+/// say. They follow a turn their measurements show; one they do not show
+/// can have gone on since the position was last measured whole
+/// (`unseen_s` ago), at up to the largest turn rate the models know
+/// (`turn_rps`, rad/s) at the aircraft's speed: an acceleration `a` held
+/// for `unseen_s` moves it `a unseen_s^2 / 2` off the straight line, where
+/// the models' small process noise had it known to hundreds of metres
+/// (a track handed over from a cloud kept flying south-east for a minute
+/// after its aircraft turned east-north-east, kilometres off with
+/// NEES in the thousands). White acceleration whose density grows with the
+/// time unseen, `3/4 a^2 unseen_s`, reaches that spread over the time
+/// (its position variance `q unseen_s^3 / 3`) and is a covariance every
+/// step, as a held acceleration's increments are not.
+fn unseen_turn(pred: &Gaussian, unseen_s: f64, dt: f64, turn_rps: f64) -> Matrix6<f64> {
+    let mut q = Matrix6::zeros();
+    if unseen_s <= 0.0 || dt <= 0.0 {
+        return q;
+    }
+    let a = pred.x[2].hypot(pred.x[3]) * turn_rps;
+    let density = 0.75 * a * a * unseen_s;
+    for axis in 0..2 {
+        let (p, v) = (axis, axis + 2);
+        q[(p, p)] = density * dt.powi(3) / 3.0;
+        q[(p, v)] = density * dt * dt / 2.0;
+        q[(v, p)] = q[(p, v)];
+        q[(v, v)] = density * dt;
+    }
+    q
 }
 
 /// `lin` with the sites' `persistent` errors added to its noise, each
