@@ -466,7 +466,14 @@ impl Mlat {
         // or none can still land on its other solution, where the noise
         // leaves none near the aircraft: one further than it could have
         // flown is that, and the group is ambiguous.
-        if fix.dof <= 1 && last_fix.is_some_and(|(p, t)| ecef_distance(p, fix.ecef) > reach_m(now - t)) {
+        // Nor is an exactly determined group whose other solution the
+        // aircraft could have reached as well: the one nearer the earlier
+        // fix is not the aircraft for that reason alone, and a fix that
+        // followed the wrong one past the point where the two meet went
+        // on along it, kilometres off, for as long as the earlier fix
+        // counted.
+        let reached = |p: [f64; 3]| last_fix.map(|(q, t)| ecef_distance(q, p) <= reach_m(now - t));
+        if fix.dof <= 1 && (reached(fix.ecef) == Some(false) || fix.mirror.and_then(reached) == Some(true)) {
             return self.short_of_fix(&info, &g, &arrivals, heard, false, now);
         }
         // Hedged against late copies, judged at the fix (as the robust

@@ -89,6 +89,9 @@ pub struct Fix {
     /// Geometric dilution of precision (3-D position, in units of the timing sigma).
     pub gdop: f64,
     pub iterations: usize,
+    /// The other solution of an exactly determined group started from an
+    /// earlier fix (ECEF), where one was found: the group fits it as well.
+    pub mirror: Option<[f64; 3]>,
 }
 
 /// Why no fix.
@@ -361,15 +364,25 @@ pub fn solve(
             None => saw_failure = true,
         }
     }
-    if let (None, true, Some(b)) = (guess, dof <= 1, &best) {
+    // Exactly determined and started from an earlier fix: the solution
+    // found is the one nearer that fix, and the other is looked for too
+    // (kept apart from the best, which it fits as exactly): the caller
+    // tells whether the aircraft could be at either.
+    let look_for_mirror = guess.is_some() && dof == 0;
+    if let (true, Some(b)) = (look_for_mirror || (guess.is_none() && dof <= 1), &best) {
         // Receivers nearly in a line see the aircraft and a second solution
         // alike, and starts near them fall to either side: a ring of starts
         // around the first solution looks for the other.
         let first = Vector3::new(b.0[0], b.0[1], b.0[2]);
-        for start in ring_starts(first) {
+        let mut scratch = None;
+        let into = if look_for_mirror { &mut scratch } else { &mut best };
+        // A mirror that matters is within reach of the earlier fix, so
+        // within tens of kilometres: the inner ring finds it.
+        let rings = if look_for_mirror { 1 } else { RING_RADII_M.len() };
+        for start in ring_starts(first).take(8 * rings) {
             let start = Vector4::new(start[0], start[1], start[2], b_for(start));
             if let Some(refined) = refine(start, ms, t0, alt, limits.max_iterations) {
-                take(refined, &mut best);
+                take(refined, into);
             }
         }
     }
@@ -391,6 +404,11 @@ pub fn solve(
         }
     }
     let p = [x[0], x[1], x[2]];
+    let here = Vector3::from(p);
+    let mirror = (look_for_mirror)
+        .then(|| fits.iter().flatten().find(|f| (*f - here).norm() > MIRROR_APART_M))
+        .flatten()
+        .map(|f| [f[0], f[1], f[2]]);
     let (h, [sp, cp, sl, cl]) = ecef_height_fast(p);
     let (lat, lon) = (sp.atan2(cp).to_degrees(), sl.atan2(cl).to_degrees());
     if !(limits.min_height_m..=limits.max_height_m).contains(&h) {
@@ -433,6 +451,7 @@ pub fn solve(
         dof,
         gdop,
         iterations,
+        mirror,
     })
 }
 

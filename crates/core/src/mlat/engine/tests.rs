@@ -123,6 +123,57 @@ fn an_exactly_determined_group_needs_an_earlier_fix_to_choose_its_solution() {
     assert_eq!((m.stats.unverified_address, m.stats.fixes), (1, 2));
 }
 
+/// Three receivers nearly in a line (the other two only for a redundant
+/// fix), an aircraft flying across the line between two of them: its
+/// exactly determined groups have a second solution mirrored across the
+/// line, which meets it at the crossing and parts from it after. No group
+/// whose other solution the aircraft could also have reached since the
+/// earlier fix is a fix (their time differences go to the track); taken
+/// as the solution nearer the earlier fix, the fixes went on along the
+/// mirror after the crossing, kilometres off.
+#[test]
+fn an_exactly_determined_group_whose_other_solution_is_within_reach_is_no_fix() {
+    let mut m = Mlat::new(MlatConfig::default());
+    let sites = [(49.0, 2.0), (49.0, 2.6), (49.0, 3.2), (49.4, 2.6), (48.6, 2.6)];
+    let rxs: Vec<ReceiverDecl> = (sites.iter().enumerate())
+        .map(|(i, &(lat, lon))| ReceiverDecl {
+            id: format!("r{i}"),
+            lat,
+            lon,
+            alt: 100.0,
+            clock: ClockKind::Gps,
+        })
+        .collect();
+    for r in &rxs {
+        m.add_receiver(r);
+    }
+    let t0 = 1_700_000_000.0;
+    // North at 200 m/s from 3 km south of the line, between r1 and r2.
+    let at = |s: f64| crate::geo::displace(48.973, 2.9, 30_000.0 * FT_TO_M, [0.0, 200.0 * s, 0.0]);
+    let ecef = |s: f64| {
+        let (lat, lon, h) = at(s);
+        geodetic_to_ecef(lat, lon, h)
+    };
+    m.on_group(&group(&rxs, ecef(0.0), t0), t0 + 0.2).fix().expect("a redundant fix");
+    let (mut fixes, mut tdoa) = (0, 0);
+    for k in 1..=30 {
+        let t = t0 + k as f64;
+        match m.on_group(&group(&rxs[..3], ecef(k as f64), t), t + 0.2) {
+            GroupOutcome::Fix(f) => {
+                let (lat, lon, _) = at(k as f64);
+                let off = crate::geo::distance_m(f.lat, f.lon, lat, lon);
+                assert!(off < 100.0, "{k} s: a fix {off:.0} m off");
+                fixes += 1;
+            }
+            GroupOutcome::Tdoa(_) => tdoa += 1,
+            // Too close to where the solutions meet for any fix.
+            GroupOutcome::NoFix(NoFix::Rejected(Reject::Gdop)) => {}
+            other => panic!("{k} s: {other:?}"),
+        }
+    }
+    assert!(tdoa >= 10, "{fixes} fixes, {tdoa} time differences");
+}
+
 /// One degree of freedom and residuals past the plain quantile: an
 /// aircraft's first fix may be the equations' other solution, so it is
 /// refused; once an earlier fix anchors the aircraft, the same group is
