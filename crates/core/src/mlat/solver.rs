@@ -405,7 +405,7 @@ pub fn solve(
     }
     let p = [x[0], x[1], x[2]];
     let here = Vector3::from(p);
-    let mirror = (look_for_mirror)
+    let mirror = look_for_mirror
         .then(|| fits.iter().flatten().find(|f| (*f - here).norm() > MIRROR_APART_M))
         .flatten()
         .map(|f| [f[0], f[1], f[2]]);

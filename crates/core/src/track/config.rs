@@ -337,7 +337,7 @@ impl TrackConfig {
             ModelConfig::Ct { turn_dps, .. } => Some(turn_dps.abs()),
             _ => None,
         });
-        turns.fold(None, |a: Option<f64>, b| Some(a.map_or(b, |a| a.max(b)))).unwrap_or(3.0).to_radians()
+        turns.reduce(f64::max).unwrap_or(3.0).to_radians()
     }
 
     /// The output period for a NACp (s).

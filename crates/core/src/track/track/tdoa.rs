@@ -98,13 +98,12 @@ impl Track {
 /// (`unseen_s` ago), at up to the largest turn rate the models know
 /// (`turn_rps`, rad/s) at the aircraft's speed: an acceleration `a` held
 /// for `unseen_s` moves it `a unseen_s^2 / 2` off the straight line, where
-/// the models' small process noise had it known to hundreds of metres
-/// (a track handed over from a cloud kept flying south-east for a minute
-/// after its aircraft turned east-north-east, kilometres off with
-/// NEES in the thousands). White acceleration whose density grows with the
-/// time unseen, `3/4 a^2 unseen_s`, reaches that spread over the time
-/// (its position variance `q unseen_s^3 / 3`) and is a covariance every
-/// step, as a held acceleration's increments are not.
+/// the models' small process noise keeps it known to hundreds of metres
+/// (docs/tracking.md). White acceleration whose density grows with the
+/// time unseen, `3/4 a^2 unseen_s`, accumulated since then spreads the
+/// position by `a unseen_s^2 / 4` (1 sigma): the largest turn held all
+/// along is two sigmas off, a gentler one less. Each step's noise is a
+/// covariance, as a held acceleration's increments are not.
 fn unseen_turn(pred: &Gaussian, unseen_s: f64, dt: f64, turn_rps: f64) -> Matrix6<f64> {
     let mut q = Matrix6::zeros();
     if unseen_s <= 0.0 || dt <= 0.0 {
