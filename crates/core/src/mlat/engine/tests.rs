@@ -7,9 +7,12 @@ use crate::mlat::group::{Copy, GroupInfo};
 use crate::mlat::state::LearntState;
 
 fn receivers() -> Vec<ReceiverDecl> {
-    [(48.80, 2.30), (48.95, 2.60), (48.60, 2.70), (48.55, 2.10), (49.05, 2.05)]
-        .iter()
-        .enumerate()
+    gps_receivers(&[(48.80, 2.30), (48.95, 2.60), (48.60, 2.70), (48.55, 2.10), (49.05, 2.05)])
+}
+
+/// GPS-timed receivers at these (lat, lon), 100 m up, named r0, r1, ...
+fn gps_receivers(sites: &[(f64, f64)]) -> Vec<ReceiverDecl> {
+    (sites.iter().enumerate())
         .map(|(i, &(lat, lon))| ReceiverDecl {
             id: format!("r{i}"),
             lat,
@@ -134,16 +137,7 @@ fn an_exactly_determined_group_needs_an_earlier_fix_to_choose_its_solution() {
 #[test]
 fn an_exactly_determined_group_whose_other_solution_is_within_reach_is_no_fix() {
     let mut m = Mlat::new(MlatConfig::default());
-    let sites = [(49.0, 2.0), (49.0, 2.6), (49.0, 3.2), (49.4, 2.6), (48.6, 2.6)];
-    let rxs: Vec<ReceiverDecl> = (sites.iter().enumerate())
-        .map(|(i, &(lat, lon))| ReceiverDecl {
-            id: format!("r{i}"),
-            lat,
-            lon,
-            alt: 100.0,
-            clock: ClockKind::Gps,
-        })
-        .collect();
+    let rxs = gps_receivers(&[(49.0, 2.0), (49.0, 2.6), (49.0, 3.2), (49.4, 2.6), (48.6, 2.6)]);
     for r in &rxs {
         m.add_receiver(r);
     }
