@@ -201,8 +201,8 @@ fn eval_runs_the_seeds_and_the_method_it_is_given() {
         .unwrap();
     assert!(sim.status.success(), "{}", String::from_utf8_lossy(&sim.stderr));
     let oracle = fuse1090::config::Config::load(&dir.path().join("oracle.toml")).unwrap();
-    assert!(oracle.receiver.iter().all(|r| r.known().timing.is_some()));
     let known = oracle.known_receivers();
+    assert!(known.iter().all(|k| k.timing.is_some()));
     let s = Scenario::load(&root.join("fixtures/scenarios/fusion-8seg-1hz.toml")).unwrap();
     let told = monte_carlo(&s, RunConfig { core: &oracle.core, known: &known }, &[Method::Ci], 5..7).unwrap();
     let fix_nees = |rows: &[McRow]| row(rows, "mlat-fix").nees.unwrap();

@@ -56,8 +56,8 @@ pub const MISPLACED_M: f64 = 30.0;
 /// The survey is judged again every few dozen measurements for as long as
 /// the receiver runs, and its estimate wanders as one: the chance that an
 /// honest receiver's estimate strays past the threshold at some look is
-/// many times the chance at one look (3e-4 at four sigmas, 4e-6 at five),
-/// and at four honest receivers, noisy ones and those with multipath most,
+/// many times the chance at one look (3e-4 at four sigmas, 4e-6 at five):
+/// at four, honest receivers (noisy ones and those with multipath most)
 /// were left out for seconds to a minute (docs/multilateration.md). An
 /// offset of 150 m still stands out within the survey's first minute.
 const MISPLACED_SIGMAS: f64 = 5.0;
