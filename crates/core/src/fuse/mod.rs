@@ -491,9 +491,25 @@ impl Fuser {
             return self.sparse_tdoa(g, &persistent[..n], now, out);
         }
         self.release_cloud(g.addr);
+        // A track's sites' synchronisation errors go with the persistent
+        // ones: taken as each transmission's own, a track that knows the
+        // aircraft to metres (its ADS-B) averaged them away and sat several
+        // of its sigmas off for minutes where only two or three receivers
+        // heard it. (A cloud, whose spread is its geometry's
+        // hundreds of metres, takes them as fresh: counted as persistent,
+        // its estimates were worse and no more honest.)
         let mut sites = [([0.0; 3], 0.0, 0.0); 3];
-        for (d, s) in sites.iter_mut().zip(&g.sites) {
+        for (k, (d, s)) in sites.iter_mut().zip(&g.sites).enumerate() {
             *d = *s;
+            // Part of the site's sigma, which keeps some of its own.
+            if let Some(sync) = g.sync_var.get(k).copied().filter(|&v| v > 0.0 && v < s.2 * s.2) {
+                d.2 = (s.2 * s.2 - sync).sqrt();
+                let p = &mut persistent[k];
+                // Lasting beyond the span, it is shared by every recent
+                // transmission (as the learnt offset's error mostly is).
+                p.var_s2 += sync;
+                p.shared_by = TdoaGroup::shared_by(recent, f64::INFINITY, TDOA_SPAN_S);
+            }
         }
         let m = Measurement {
             t: g.t,

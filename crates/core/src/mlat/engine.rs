@@ -576,6 +576,7 @@ impl Mlat {
                 persistent: (g.sites.iter())
                     .map(|site| self.rxs[site[0]].offset_error(now).unwrap_or((0.0, 0.0)))
                     .collect(),
+                sync_var: g.sync_vars.to_vec(),
                 unheard: self.coverage.unheard(heard, now),
             });
         }

@@ -45,6 +45,10 @@ pub struct TdoaGroup {
     /// how long it lasts (s). The same error in every transmission a track
     /// takes, it cannot be averaged away (see `track::Persistent`).
     pub persistent: Vec<(f64, f64)>,
+    /// Each site's clock synchronisation variance (s^2), part of its sigma:
+    /// the pair filters' estimate's error, which changes only as their
+    /// updates replace it, over many of the aircraft's transmissions.
+    pub sync_var: Vec<f64>,
     /// Who heard it, with every receiver's coverage: the silence of the
     /// others places it too (`None` where nothing is known of coverage).
     pub unheard: Option<crate::mlat::coverage::Unheard>,

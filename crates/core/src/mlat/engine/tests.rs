@@ -378,6 +378,53 @@ fn an_excluded_receiver_is_readmitted_when_its_sync_holds_again() {
     assert!(last_fix_used_it, "back in the fixes");
 }
 
+/// A counter-timed receiver's time reaches the network through its pair
+/// filters, whose estimate's error stays for many transmissions: its time
+/// differences say how much of its sigma that error is, for the tracks to
+/// count it as persistent (see the fuser's tests).
+#[test]
+fn a_counter_s_time_differences_say_its_sync_variance() {
+    let (mut m, mut rxs) = engine();
+    let counter =
+        ReceiverDecl { id: "c".into(), lat: 48.7, lon: 2.45, alt: 100.0, clock: ClockKind::Beast12 };
+    m.add_receiver(&counter);
+    rxs.push(counter.clone());
+    let c_ecef = geodetic_to_ecef(counter.lat, counter.lon, counter.alt);
+    let t0 = 1_700_000_000.0;
+    // Its copy of a transmission at `t` from `target`, 100 s into its count.
+    let with_counter = |rxs: &[ReceiverDecl], target: [f64; 3], t: f64| {
+        let mut g = group(rxs, target, t);
+        let toa = t - t0 + 100.0 + ecef_distance(c_ecef, target) / C_AIR;
+        g.copies.push(Copy { rx: 5, timestamp: (toa * 12e6).round() as u64, arrival: t + 0.1, signal: 90 });
+        g
+    };
+    for k in 0..200 {
+        let t = t0 + k as f64 * 0.5;
+        let (lat, lon) = (48.5 + 0.02 * (k % 23) as f64, 2.1 + 0.03 * (k % 19) as f64);
+        let target = geodetic_to_ecef(lat, lon, 30_000.0 * FT_TO_M);
+        let mut g = with_counter(&rxs[..5], target, t);
+        g.info.addr = 0x400000 + (k % 40) as u32;
+        if k % 2 == 0 {
+            g.info.adsb_ecef = Some(target);
+            g.info.adsb_sigma_m = 5.0;
+        }
+        m.on_group(&g, t + 0.2);
+    }
+    // Two GPS-timed receivers and the counter, an aircraft never fixed.
+    let t = t0 + 100.0;
+    let target = geodetic_to_ecef(48.75, 2.40, 30_000.0 * FT_TO_M);
+    let GroupOutcome::Tdoa(g) = m.on_group(&with_counter(&rxs[..2], target, t), t + 0.2) else {
+        panic!("time differences expected");
+    };
+    assert_eq!(g.sites.len(), 3);
+    let rx = &m.rxs[5];
+    let own = rx.sigma().powi(2) + rx.surveyed_var_s2;
+    let sync = g.sync_var[2];
+    assert!(sync.sqrt() > 1e-9, "the counter's sync sigma: {} ns", sync.sqrt() * 1e9);
+    assert!((g.sites[2].2.powi(2) - own - sync).abs() < 1e-3 * own, "its sigma is its own and its sync's");
+    assert_eq!(&g.sync_var[..2], &[0.0, 0.0], "GPS-timed receivers need no sync");
+}
+
 #[test]
 fn aircraft_are_forgotten_once_unheard_for_their_time_to_live() {
     let (mut m, rxs) = engine();
