@@ -68,6 +68,17 @@ fn engine() -> (Mlat, Vec<ReceiverDecl>) {
     (m, rxs)
 }
 
+/// [`engine`] with a sixth receiver, counter-timed ("c", index 5), and
+/// its ECEF position.
+fn engine_with_counter() -> (Mlat, Vec<ReceiverDecl>, [f64; 3]) {
+    let (mut m, mut rxs) = engine();
+    let counter =
+        ReceiverDecl { id: "c".into(), lat: 48.7, lon: 2.45, alt: 100.0, clock: ClockKind::Beast12 };
+    m.add_receiver(&counter);
+    rxs.push(counter.clone());
+    (m, rxs, geodetic_to_ecef(counter.lat, counter.lon, counter.alt))
+}
+
 #[test]
 fn a_clean_group_gives_an_accurate_fix() {
     let (mut m, rxs) = engine();
@@ -334,12 +345,7 @@ fn receivers_hundreds_of_metres_apart_are_two_sites() {
 /// clock is not exclusion: its pairs restart, see the sync's tests.)
 #[test]
 fn an_excluded_receiver_is_readmitted_when_its_sync_holds_again() {
-    let (mut m, mut rxs) = engine();
-    let counter =
-        ReceiverDecl { id: "c".into(), lat: 48.7, lon: 2.45, alt: 100.0, clock: ClockKind::Beast12 };
-    m.add_receiver(&counter);
-    rxs.push(counter.clone());
-    let c_ecef = geodetic_to_ecef(counter.lat, counter.lon, counter.alt);
+    let (mut m, rxs, c_ecef) = engine_with_counter();
     let t0 = 1_700_000_000.0;
     let (mut excluded_at, mut readmitted_at) = (None, None);
     let mut last_fix_used_it = false;
@@ -384,12 +390,7 @@ fn an_excluded_receiver_is_readmitted_when_its_sync_holds_again() {
 /// count it as persistent (see the fuser's tests).
 #[test]
 fn a_counter_s_time_differences_say_its_sync_variance() {
-    let (mut m, mut rxs) = engine();
-    let counter =
-        ReceiverDecl { id: "c".into(), lat: 48.7, lon: 2.45, alt: 100.0, clock: ClockKind::Beast12 };
-    m.add_receiver(&counter);
-    rxs.push(counter.clone());
-    let c_ecef = geodetic_to_ecef(counter.lat, counter.lon, counter.alt);
+    let (mut m, rxs, c_ecef) = engine_with_counter();
     let t0 = 1_700_000_000.0;
     // Its copy of a transmission at `t` from `target`, 100 s into its count.
     let with_counter = |rxs: &[ReceiverDecl], target: [f64; 3], t: f64| {
