@@ -79,6 +79,31 @@ fn engine_with_counter() -> (Mlat, Vec<ReceiverDecl>, [f64; 3]) {
     (m, rxs, geodetic_to_ecef(counter.lat, counter.lon, counter.alt))
 }
 
+/// The counter's copy of a transmission from `target` at `t` (Unix s): its
+/// count started 100 s before `t0`, and reads `step` s off.
+fn counter_copy(c_ecef: [f64; 3], target: [f64; 3], t: f64, t0: f64, step: f64) -> Copy {
+    let toa = t - t0 + 100.0 + ecef_distance(c_ecef, target) / C_AIR + step;
+    Copy { rx: 5, timestamp: (toa * 12e6).round() as u64, arrival: t + 0.1, signal: 90 }
+}
+
+/// Transmission `k` (every half second from `t0`) of traffic the five
+/// GPS-timed receivers and the counter all hear: many aircraft (each judged
+/// as a sync source on its own), every other transmission an ADS-B
+/// position. With its time.
+fn counter_traffic(rxs: &[ReceiverDecl], c_ecef: [f64; 3], k: usize, t0: f64, step: f64) -> (Group, f64) {
+    let t = t0 + k as f64 * 0.5;
+    let (lat, lon) = (48.5 + 0.02 * (k % 23) as f64, 2.1 + 0.03 * (k % 19) as f64);
+    let target = geodetic_to_ecef(lat, lon, 30_000.0 * FT_TO_M);
+    let mut g = group(&rxs[..5], target, t);
+    g.copies.push(counter_copy(c_ecef, target, t, t0, step));
+    g.info.addr = 0x400000 + (k % 40) as u32;
+    if k % 2 == 0 {
+        g.info.adsb_ecef = Some(target);
+        g.info.adsb_sigma_m = 5.0;
+    }
+    (g, t)
+}
+
 #[test]
 fn a_clean_group_gives_an_accurate_fix() {
     let (mut m, rxs) = engine();
@@ -350,20 +375,8 @@ fn an_excluded_receiver_is_readmitted_when_its_sync_holds_again() {
     let (mut excluded_at, mut readmitted_at) = (None, None);
     let mut last_fix_used_it = false;
     for k in 0..1200 {
-        let t = t0 + k as f64 * 0.5;
-        let (lat, lon) = (48.5 + 0.02 * (k % 23) as f64, 2.1 + 0.03 * (k % 19) as f64);
-        let target = geodetic_to_ecef(lat, lon, 30_000.0 * FT_TO_M);
-        let mut g = group(&rxs[..5], target, t);
         let step = if (200..400).contains(&k) { ((k * 7919) % 13) as f64 * 1e-6 - 6e-6 } else { 0.0 };
-        let toa = t - t0 + 100.0 + ecef_distance(c_ecef, target) / C_AIR + step;
-        g.copies.push(Copy { rx: 5, timestamp: (toa * 12e6).round() as u64, arrival: t + 0.1, signal: 90 });
-        // Traffic of many aircraft (each judged as a sync source on its
-        // own), every other transmission an ADS-B position.
-        g.info.addr = 0x400000 + (k % 40) as u32;
-        if k % 2 == 0 {
-            g.info.adsb_ecef = Some(target);
-            g.info.adsb_sigma_m = 5.0;
-        }
+        let (g, t) = counter_traffic(&rxs, c_ecef, k, t0, step);
         let fix = m.on_group(&g, t + 0.2);
         let out = m.sync.health[5].excluded;
         if out && excluded_at.is_none() {
@@ -392,29 +405,16 @@ fn an_excluded_receiver_is_readmitted_when_its_sync_holds_again() {
 fn a_counter_s_time_differences_say_its_sync_variance() {
     let (mut m, rxs, c_ecef) = engine_with_counter();
     let t0 = 1_700_000_000.0;
-    // Its copy of a transmission at `t` from `target`, 100 s into its count.
-    let with_counter = |rxs: &[ReceiverDecl], target: [f64; 3], t: f64| {
-        let mut g = group(rxs, target, t);
-        let toa = t - t0 + 100.0 + ecef_distance(c_ecef, target) / C_AIR;
-        g.copies.push(Copy { rx: 5, timestamp: (toa * 12e6).round() as u64, arrival: t + 0.1, signal: 90 });
-        g
-    };
     for k in 0..200 {
-        let t = t0 + k as f64 * 0.5;
-        let (lat, lon) = (48.5 + 0.02 * (k % 23) as f64, 2.1 + 0.03 * (k % 19) as f64);
-        let target = geodetic_to_ecef(lat, lon, 30_000.0 * FT_TO_M);
-        let mut g = with_counter(&rxs[..5], target, t);
-        g.info.addr = 0x400000 + (k % 40) as u32;
-        if k % 2 == 0 {
-            g.info.adsb_ecef = Some(target);
-            g.info.adsb_sigma_m = 5.0;
-        }
+        let (g, t) = counter_traffic(&rxs, c_ecef, k, t0, 0.0);
         m.on_group(&g, t + 0.2);
     }
     // Two GPS-timed receivers and the counter, an aircraft never fixed.
     let t = t0 + 100.0;
     let target = geodetic_to_ecef(48.75, 2.40, 30_000.0 * FT_TO_M);
-    let GroupOutcome::Tdoa(g) = m.on_group(&with_counter(&rxs[..2], target, t), t + 0.2) else {
+    let mut g = group(&rxs[..2], target, t);
+    g.copies.push(counter_copy(c_ecef, target, t, t0, 0.0));
+    let GroupOutcome::Tdoa(g) = m.on_group(&g, t + 0.2) else {
         panic!("time differences expected");
     };
     assert_eq!(g.sites.len(), 3);
