@@ -68,6 +68,17 @@ fn engine() -> (Mlat, Vec<ReceiverDecl>) {
     (m, rxs)
 }
 
+/// [`engine`] with a sixth GPS-timed receiver, r5, south of the others.
+fn engine_of_six() -> (Mlat, Vec<ReceiverDecl>) {
+    let mut m = Mlat::new(MlatConfig::default());
+    let mut rxs = receivers();
+    rxs.push(ReceiverDecl { id: "r5".into(), lat: 48.4, lon: 2.4, alt: 100.0, clock: ClockKind::Gps });
+    for r in &rxs {
+        m.add_receiver(r);
+    }
+    (m, rxs)
+}
+
 /// [`engine`] with a sixth receiver, counter-timed ("c", index 5), and
 /// its ECEF position.
 fn engine_with_counter() -> (Mlat, Vec<ReceiverDecl>, [f64; 3]) {
@@ -263,12 +274,7 @@ fn bad_input_is_dropped_and_counted_never_a_fix() {
 fn calibration_learns_a_bias_and_the_noise_without_trusting_a_few_fixes() {
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
-    let mut m = Mlat::new(MlatConfig::default());
-    let mut rxs = receivers();
-    rxs.push(ReceiverDecl { id: "r5".into(), lat: 48.4, lon: 2.4, alt: 100.0, clock: ClockKind::Gps });
-    for r in &rxs {
-        m.add_receiver(r);
-    }
+    let (mut m, rxs) = engine_of_six();
     let configured = m.rxs[0].sigma_t;
     // Real jitter 20 ns (the configuration says 50), receiver 2 late by 150 ns.
     let noise = Normal::new(0.0, 20e-9).unwrap();
@@ -591,12 +597,7 @@ fn a_copy_milliseconds_off_is_kept_out_of_the_surveys() {
 fn a_cold_start_s_first_fixes_count_the_receivers_unknown_offsets() {
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
-    let mut m = Mlat::new(MlatConfig::default());
-    let mut rxs = receivers();
-    rxs.push(ReceiverDecl { id: "r5".into(), lat: 48.4, lon: 2.4, alt: 100.0, clock: ClockKind::Gps });
-    for r in &rxs {
-        m.add_receiver(r);
-    }
+    let (mut m, rxs) = engine_of_six();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
     // Biases of real GPS receivers (hundreds of ns), jitter 30 ns.
     let biases: Vec<f64> =
