@@ -484,7 +484,6 @@ impl Mlat {
             Some(j) => super::solver::hedge(&fix, &j.at, |k| j.p_late(k)),
             None => fix,
         };
-        let fix = self.with_offset_doubt(fix, &g, alt, judged.as_ref().map(|j| &j.at));
         let used: smallvec::SmallVec<[usize; 8]> = g.sites.iter().flatten().copied().collect();
         if !info.addr_known && fix.dof == 0 {
             // Nothing checks an unverified address: no fix from it.

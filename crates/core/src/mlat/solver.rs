@@ -620,28 +620,6 @@ pub fn hedge(fix: &Fix, at: &AtFix, p_late: impl Fn(usize) -> f64) -> Fix {
     out
 }
 
-/// A fix's covariance widened by errors its measurements may carry that
-/// the fit did not weigh (a consider term): `var_s2(k)`, the variance of a
-/// constant error of measurement `k`'s time, moves the fix by its gain
-/// `d x / d t_k` (each error apart, linearised at the fix as `at` gives it).
-/// The position and the fit's weights stay as they are.
-pub fn consider(fix: &Fix, at: &AtFix, var_s2: impl Fn(usize) -> f64) -> Fix {
-    let mut cov = Matrix3::from_fn(|r, c| fix.cov_ecef[r][c]);
-    for (k, &(_, j, w, _)) in at.rows.iter().enumerate() {
-        let v = var_s2(k) * C_AIR * C_AIR;
-        if v > 0.0 {
-            // The rows are in metres of range: the gain is metres per metre.
-            let g3 = (at.inv * j * w).fixed_rows::<3>(0).into_owned();
-            cov += (g3 * g3.transpose()) * v;
-        }
-    }
-    let mut out = *fix;
-    let (_, [sp, cp, sl, cl]) = ecef_height_fast(fix.ecef);
-    out.cov_ecef = std::array::from_fn(|r| std::array::from_fn(|c| cov[(r, c)]));
-    out.cov_en = cov_en_of(&cov, [sp, cp, sl, cl]);
-    out
-}
-
 /// Levenberg-Marquardt from `x`.
 fn refine(
     mut x: Vector4<f64>,

@@ -38,10 +38,6 @@ const LATE_RATE_RANGE: (f64, f64) = (0.002, 0.5);
 pub const GLITCH_Z: f64 = 6.0;
 /// A learnt offset is applied only after this many residuals.
 pub const MIN_RESIDUALS: u64 = 20;
-/// How far a receiver's constant offset may be before any is learnt (s, 1
-/// sigma): real GPS receivers carry fixed biases of hundreds of
-/// nanoseconds, and a counter's time inherits its GPS partner's.
-const PRIOR_OFFSET_SIGMA_S: f64 = 200e-9;
 
 /// What has been learnt about one receiver's timing.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -180,30 +176,6 @@ impl TimingModel {
 
     /// How many residuals an error of the learnt offset lasts for.
     pub const OFFSET_MEMORY: f64 = 1.0 / OFFSET_STEP;
-
-    /// The variance (s^2) of what is left of the offset's prior error: all
-    /// of it until the offset is applied (a cold start's first fixes
-    /// weighted the receivers by their cores alone, as if their biases were
-    /// known, and sat hundreds of metres off at a few dozen metres' sigma),
-    /// then what its steps would have left had each taken [`OFFSET_STEP`]
-    /// of it. That is a lower bound: a copy of high leverage shows only
-    /// `1 - h` of its offset's error, so where most are, fixes stay
-    /// overconfident for longer. Counted lesson by lesson with the leverage,
-    /// the doubt of a receiver rarely taught lasted minutes, and on a world
-    /// without biases that cost tracks their precision (see
-    /// docs/multilateration.md).
-    pub fn offset_doubt_var(&self) -> f64 {
-        let prior = PRIOR_OFFSET_SIGMA_S * PRIOR_OFFSET_SIGMA_S;
-        if !self.learnt() {
-            return prior;
-        }
-        // None once it is below a millionth of the prior (150 residuals in),
-        // so that a network past its first seconds pays nothing for it.
-        if self.n > 150 {
-            return 0.0;
-        }
-        prior * (1.0 - OFFSET_STEP).powi(2 * self.n as i32)
-    }
 
     /// A leave-one-out residual `d` (s, measured minus the others' model,
     /// its offset already removed) whose core variance is `var_s2`

@@ -143,45 +143,6 @@ impl Mlat {
         Some(Judged::new(at, &all, sites))
     }
 
-    /// The fix's covariance widened by what its receivers' offsets, not yet
-    /// learnt, may still be off by
-    /// ([`crate::mlat::timing::TimingModel::offset_doubt_var`]), as a
-    /// consider term: the fit's weights, its consistency checks and the
-    /// copies' verdicts stay the cores'. (Weighted by the doubt as well, a
-    /// cold start's checks were as weak as the doubt is wide: an aircraft's
-    /// first fix passed with a copy 600 ns late, which may be the equations'
-    /// other solution, and late copies passed as the core's and taught the
-    /// precise receivers sigmas that made the next quarter minute's fixes
-    /// conservative.) A merged site takes its most doubtful receiver's.
-    pub(super) fn with_offset_doubt(
-        &self,
-        fix: crate::mlat::solver::Fix,
-        g: &GroupCopies,
-        alt: Option<AltitudeConstraint>,
-        at: Option<&AtFix>,
-    ) -> crate::mlat::solver::Fix {
-        let doubt = |k: usize| {
-            (g.sites.get(k).into_iter().flatten())
-                .map(|&rx| self.rxs[rx].timing.offset_doubt_var())
-                .fold(0.0, f64::max)
-        };
-        if (0..g.sites.len()).all(|k| doubt(k) == 0.0) {
-            return fix;
-        }
-        let built;
-        let at = match at {
-            Some(at) => at,
-            None => match AtFix::new(&g.ms, alt, &fix) {
-                Some(at) => {
-                    built = at;
-                    &built
-                }
-                None => return fix,
-            },
-        };
-        crate::mlat::solver::consider(&fix, at, doubt)
-    }
-
     /// Each copy's residual at the linearised fix judged under its (first)
     /// receiver's timing model, with the variance the fix weighted it by.
     fn verdicts(&self, at: &AtFix, ms: &[Measurement], sites: &[Site]) -> GroupVec<Verdict> {

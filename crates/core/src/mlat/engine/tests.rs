@@ -68,17 +68,6 @@ fn engine() -> (Mlat, Vec<ReceiverDecl>) {
     (m, rxs)
 }
 
-/// [`engine`] with a sixth GPS-timed receiver, r5, south of the others.
-fn engine_of_six() -> (Mlat, Vec<ReceiverDecl>) {
-    let mut m = Mlat::new(MlatConfig::default());
-    let mut rxs = receivers();
-    rxs.push(ReceiverDecl { id: "r5".into(), lat: 48.4, lon: 2.4, alt: 100.0, clock: ClockKind::Gps });
-    for r in &rxs {
-        m.add_receiver(r);
-    }
-    (m, rxs)
-}
-
 /// [`engine`] with a sixth receiver, counter-timed ("c", index 5), and
 /// its ECEF position.
 fn engine_with_counter() -> (Mlat, Vec<ReceiverDecl>, [f64; 3]) {
@@ -274,7 +263,12 @@ fn bad_input_is_dropped_and_counted_never_a_fix() {
 fn calibration_learns_a_bias_and_the_noise_without_trusting_a_few_fixes() {
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
-    let (mut m, rxs) = engine_of_six();
+    let mut m = Mlat::new(MlatConfig::default());
+    let mut rxs = receivers();
+    rxs.push(ReceiverDecl { id: "r5".into(), lat: 48.4, lon: 2.4, alt: 100.0, clock: ClockKind::Gps });
+    for r in &rxs {
+        m.add_receiver(r);
+    }
     let configured = m.rxs[0].sigma_t;
     // Real jitter 20 ns (the configuration says 50), receiver 2 late by 150 ns.
     let noise = Normal::new(0.0, 20e-9).unwrap();
@@ -589,38 +583,4 @@ fn a_copy_milliseconds_off_is_kept_out_of_the_surveys() {
         assert!(e.hypot(n) < 5.0, "rx {rx}: {e:.1} east, {n:.1} north");
         assert_eq!(r.reason, None, "rx {rx}");
     }
-}
-
-/// A cold start: receivers' biases are unknown until their offsets are
-/// learnt, and the first fixes say so in their covariance.
-#[test]
-fn a_cold_start_s_first_fixes_count_the_receivers_unknown_offsets() {
-    use rand::SeedableRng;
-    use rand_distr::{Distribution, Normal};
-    let (mut m, rxs) = engine_of_six();
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
-    // Biases of real GPS receivers (hundreds of ns), jitter 30 ns.
-    let biases: Vec<f64> =
-        (0..rxs.len()).map(|_| Normal::new(0.0, 150e-9).unwrap().sample(&mut rng)).collect();
-    let noise = Normal::new(0.0, 30e-9).unwrap();
-    let t0 = 1_700_000_000.0;
-    let mut nees = Vec::new();
-    // The first 20 fixes: their receivers' offsets not yet applied.
-    for k in 0..20 {
-        let (lat, lon) = (48.5 + 0.03 * (k % 17) as f64, 2.1 + 0.04 * (k % 13) as f64);
-        let t = t0 + 0.01 * k as f64;
-        let mut g = group(&rxs, geodetic_to_ecef(lat, lon, 30_000.0 * FT_TO_M), t);
-        for (c, b) in g.copies.iter_mut().zip(&biases) {
-            delay(c, 1e-6 + b + noise.sample(&mut rng));
-        }
-        let f = m.on_group(&g, t + 0.2).fix().expect("a fix");
-        let (mr, nr) = crate::geo::radii(lat.to_radians());
-        let e = (f.lon - lon).to_radians() * nr * lat.to_radians().cos();
-        let n = (f.lat - lat).to_radians() * mr;
-        let c = nalgebra::Matrix2::new(f.cov_en[0][0], f.cov_en[0][1], f.cov_en[1][0], f.cov_en[1][1]);
-        let d = nalgebra::Vector2::new(e, n);
-        nees.push((d.transpose() * c.try_inverse().expect("covariance") * d)[0]);
-    }
-    let mean = nees.iter().sum::<f64>() / nees.len() as f64;
-    assert!(mean < 4.0, "first fixes: NEES {mean:.1}");
 }
