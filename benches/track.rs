@@ -38,6 +38,7 @@ fn position(lat: f64, lon: f64) -> fuse1090::track::Observation {
         time_sigma_s: 0.01,
         surface: false,
         claimed: true,
+        persistent: fuse1090::track::SharedShare::default(),
     }
 }
 

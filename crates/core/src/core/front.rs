@@ -33,7 +33,7 @@ use crate::mlat::Mlat;
 use crate::modes::commb::{Inference, Register};
 use crate::modes::nic::{position_sigma_m, velocity_sigmas_ms};
 use crate::modes::{Body, Decoder, DecoderConfig, Es};
-use crate::track::{Measurement, Observation, Source};
+use crate::track::{Measurement, Observation, SharedShare, Source};
 
 struct RxState {
     decl: ReceiverDecl,

@@ -129,6 +129,8 @@ struct Aircraft {
     sparse_gated: u32,
     /// Its transmissions taken as time differences, faded over [`TDOA_SPAN_S`].
     tdoa_recent: RecentCount,
+    /// Its fixes whose clock synchronisation error persists, faded likewise.
+    fix_recent: RecentCount,
     motion: MotionTest,
     motion_plane: Option<Plane>,
     motion_state: Motion,
@@ -320,7 +322,7 @@ impl Fuser {
         &mut self,
         addr: u32,
         nac_p: Option<u8>,
-        m: Measurement,
+        mut m: Measurement,
         now: f64,
         out: &mut Vec<Output>,
     ) {
@@ -364,6 +366,7 @@ impl Fuser {
                     sparse_geometry: false,
                     sparse_gated: 0,
                     tdoa_recent: RecentCount::default(),
+                    fix_recent: RecentCount::default(),
                     motion: self.motion.clone(),
                     motion_plane: None,
                     motion_state: Motion::Unknown,
@@ -378,6 +381,15 @@ impl Fuser {
         }
         let a = self.aircraft.get_mut(&addr).expect("inserted");
         a.last_heard = now;
+        if let Observation::Position { persistent, .. } = &mut m.obs {
+            if persistent.share > 0.0 {
+                // A pair filter's error lasts beyond the span: every recent
+                // fix of the aircraft shares it, as the time differences'
+                // sync errors are.
+                let recent = a.fix_recent.add(m.t, TDOA_SPAN_S);
+                persistent.shared_by = TdoaGroup::shared_by(recent, f64::INFINITY, TDOA_SPAN_S);
+            }
+        }
         if let Observation::Height { h, .. } = m.obs {
             a.height = Some((h, m.t));
         }

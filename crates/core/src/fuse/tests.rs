@@ -16,6 +16,7 @@ pub(super) fn pos(t: f64, lat: f64, lon: f64) -> Measurement {
             time_sigma_s: 0.0,
             surface: false,
             claimed: true,
+            persistent: crate::track::SharedShare::default(),
         },
     }
 }
@@ -53,6 +54,7 @@ fn impossible_measurements_are_rejected_and_counted() {
             time_sigma_s: 0.0,
             surface: false,
             claimed: true,
+            persistent: crate::track::SharedShare::default(),
         },
         ..pos(100.0, 45.0, 5.0)
     };
@@ -151,6 +153,7 @@ fn multilaterated(mlat_only: bool, seed: u64, adsb_first: bool, suspect: bool) -
                 time_sigma_s: 0.0,
                 surface: false,
                 claimed: true,
+                persistent: crate::track::SharedShare::default(),
             },
             ..pos(t, lat, lon)
         };

@@ -128,9 +128,11 @@ pub struct TrackConfig {
     /// at least the first).
     pub adsb_time_sigma_gps_s: f64,
     pub adsb_time_sigma_arrival_s: f64,
-    /// MLAT fixes' covariance is multiplied by up to this much, in
-    /// proportion to the share of their timing variance that came from
-    /// clock synchronisation (which persists from fix to fix).
+    /// MLAT fixes' covariance, as the conformance monitor weighs them
+    /// against ADS-B, is multiplied by up to this much, in proportion to the
+    /// share of their timing variance that came from clock synchronisation
+    /// (which persists from fix to fix). A track counts that share as often
+    /// as its own memory holds fixes instead (`track::persistent`).
     pub mlat_sync_inflation: f64,
     /// Comm-B track and turn reports (BDS 5,0) of aircraft without ADS-B
     /// velocity feed their tracks as velocity measurements, and their heading

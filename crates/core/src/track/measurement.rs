@@ -37,6 +37,9 @@ pub enum Observation {
         time_sigma_s: f64,
         surface: bool,
         claimed: bool,
+        /// The share of `cov_en` that is the same in the aircraft's next
+        /// positions too (an MLAT fix's clock synchronisation error).
+        persistent: SharedShare,
     },
     /// Ground velocity (east, north m/s, covariance) and climb rate (m/s, variance).
     Velocity { v_en: Vector2<f64>, cov: Matrix2<f64>, climb: Option<(f64, f64)> },
@@ -95,6 +98,26 @@ impl Persistent {
     /// transmissions should, at most as often as it is shared.
     pub fn counted(&self, memory: f64) -> f64 {
         self.var_s2 * memory.min(self.shared_by).max(1.0)
+    }
+}
+
+/// The share of a position's covariance that stays from one position of
+/// the aircraft to the next: an MLAT fix's clock synchronisation error,
+/// which a pair filter carries for as long as its updates take to replace
+/// it. A track counts it as often as its memory holds positions, at most
+/// as often as it is shared (`track::persistent`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SharedShare {
+    /// Its share of the covariance, 0 to 1.
+    pub share: f64,
+    /// The most positions it is shared by (at least 1).
+    pub shared_by: f64,
+}
+
+/// None: every error the position's own.
+impl Default for SharedShare {
+    fn default() -> Self {
+        SharedShare { share: 0.0, shared_by: 1.0 }
     }
 }
 

@@ -28,4 +28,4 @@ pub use config::{ModelConfig, TrackConfig};
 pub use imm::{Imm, ImmSpec};
 pub use kf::{Gaussian, Linear, PosMeasurement};
 pub use models::MotionModel;
-pub use track::{Estimate, Measurement, Observation, Outcome, Persistent, Source, Stage, Track};
+pub use track::{Estimate, Measurement, Observation, Outcome, Persistent, SharedShare, Source, Stage, Track};

@@ -43,10 +43,11 @@ use super::imm::{Imm, ImmSpec};
 use super::kf::{self, Gaussian, Linear};
 use super::lifecycle::Lifecycle;
 pub use super::lifecycle::Stage;
-pub use super::measurement::{Measurement, Observation, Outcome, Persistent, Source};
+pub use super::measurement::{Measurement, Observation, Outcome, Persistent, SharedShare, Source};
 use super::noise::Noise;
 use super::plane::Plane;
 
+mod persistent;
 mod position;
 mod tdoa;
 mod velocity;
@@ -355,12 +356,12 @@ impl Track {
             }
         }
         let outcome = match m.obs {
-            Observation::Position { lat, lon, cov_en, height, time_sigma_s, claimed, .. } => {
+            Observation::Position { lat, lon, cov_en, height, time_sigma_s, claimed, persistent, .. } => {
                 if let Some((h, var)) = height {
                     self.vertical(m.t, 0, h, var);
                 }
                 self.rebase_vb(m.source, cov_en.trace(), claimed);
-                self.position(m.t, dt, lat, lon, cov_en, time_sigma_s, m.source)
+                self.position(m.t, dt, (lat, lon, cov_en), time_sigma_s, persistent, m.source)
             }
             Observation::Velocity { v_en, cov, climb } => {
                 if let Some((c, var)) = climb {

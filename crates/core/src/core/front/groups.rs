@@ -28,13 +28,14 @@ impl GroupCtx<'_> {
         };
         self.stats.fixes += 1;
         let c = fix.cov_en;
-        // Synchronisation errors persist from fix to fix; a filter that took
-        // them as white would average them away and claim too much.
+        // Synchronisation errors persist from fix to fix: the conformance
+        // monitor, which weighs fixes against ADS-B one by one, takes them
+        // inflated; a track counts them by its own memory (the share).
         let inflation = 1.0 + fix.sync_share * (self.sync_inflation - 1.0);
         // What clocks synchronised on this aircraft's own ADS-B put in the
         // fix is its ADS-B errors again: only the rest is news to a track
         // that has its ADS-B, so only the rest is counted.
-        let own = inflation / (1.0 - fix.self_sync_share).max(MIN_INDEPENDENT_SHARE);
+        let own = 1.0 / (1.0 - fix.self_sync_share).max(MIN_INDEPENDENT_SHARE);
         let m = Measurement {
             t: fix.t,
             source: Source::Mlat,
@@ -50,6 +51,8 @@ impl GroupCtx<'_> {
                 time_sigma_s: 0.0,
                 surface: false,
                 claimed: true,
+                // How many fixes share it is the fuser's to say.
+                persistent: SharedShare { share: fix.sync_share.clamp(0.0, 1.0), shared_by: 1.0 },
             },
         };
         let (addr, t) = (fix.addr, fix.t);

@@ -50,6 +50,7 @@ impl Front {
                     time_sigma_s,
                     surface: p.surface,
                     claimed: p.nac_p.is_some_and(|n| n > 0),
+                    persistent: SharedShare::default(),
                 },
             };
             out.push(Cmd::Measure { addr, nac_p: p.nac_p, m, now: arrival });

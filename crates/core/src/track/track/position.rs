@@ -15,10 +15,9 @@ impl Track {
         &mut self,
         t: f64,
         dt: f64,
-        lat: f64,
-        lon: f64,
-        cov_en: Matrix2<f64>,
+        (lat, lon, cov_en): (f64, f64, Matrix2<f64>),
         time_sigma_s: f64,
+        persistent: SharedShare,
         source: Source,
     ) -> Outcome {
         let (Some(plane), Some(imm)) = (self.state.plane, self.state.imm.as_mut()) else {
@@ -34,6 +33,7 @@ impl Track {
         // The report's time error moves it along the velocity.
         let v = pred.x.fixed_rows::<2>(2).into_owned();
         let nominal = cov_en + v * v.transpose() * (time_sigma_s * time_sigma_s);
+        let nominal = with_shared(nominal, &cov_en, &(kf::h() * pred.p * kf::h().transpose()), persistent);
         let noise = &mut self.state.noise[source as usize];
         if self.cfg.vb {
             let (rho, prior) = match source {
@@ -215,4 +215,23 @@ impl Track {
         }
         self.state.plane = Some(new);
     }
+}
+
+/// The `nominal` noise of a position with its `persistent` share of
+/// `cov_en` counted as often as the track's memory (its prior `state` in
+/// the plane) holds positions, at most as often as it is shared
+/// ([`super::persistent::counted`]); the rest taken as the position's own.
+fn with_shared(
+    nominal: Matrix2<f64>,
+    cov_en: &Matrix2<f64>,
+    state: &Matrix2<f64>,
+    persistent: SharedShare,
+) -> Matrix2<f64> {
+    if !persistent.share.is_finite() || persistent.share <= 0.0 {
+        return nominal;
+    }
+    let once = cov_en * persistent.share.min(1.0);
+    let fresh = nominal - once;
+    let shared_by = persistent.shared_by.max(1.0);
+    fresh + super::persistent::counted(&fresh, state, &once, |n| once * n.min(shared_by).max(1.0))
 }

@@ -3,15 +3,10 @@
 //! vertical channel's height, go straight into the track through an
 //! unscented transform linearised once at the combined prediction.
 //!
-//! Each site's persistent error (its learnt offset's) is the same in every
-//! transmission: a filter taking them as independent would average it away.
-//! Counted once for every transmission that shares it, it is right for a
-//! filter that remembers them all, and too much for one whose process noise
-//! forgets all but the last few: the track is then surer of the aircraft
-//! than its estimate says. So each transmission counts it as often as the
-//! track's own memory holds transmissions, found from how sure the track
-//! already is along the measured differences ([`Persistent::memory`]),
-//! direction by direction (two differences are rarely known alike).
+//! Each site's persistent error (its learnt offset's, its clock
+//! synchronisation's) is the same in every transmission: each counts it as
+//! often as the track's own memory holds transmissions, direction by
+//! direction (two differences are rarely known alike; `track::persistent`).
 
 use super::*;
 use nalgebra::{Matrix6, SMatrix};
@@ -123,15 +118,10 @@ fn unseen_turn(pred: &Gaussian, unseen_s: f64, dt: f64, turn_rps: f64) -> Matrix
 
 /// `lin` with the sites' `persistent` errors added to its noise, each
 /// counted as often as the track's memory (at `prior`) holds transmissions,
-/// direction by direction: two differences are not known alike (where two
-/// hyperbolas cross at a shallow angle, one combination of them moves the
-/// aircraft far along the crossing and the other hardly at all), and a
-/// track remembers more transmissions along the one its process noise
-/// blurs less. Taken over both at once (their traces, which the widest
-/// direction fills), the memory was the shorter one, and the persistent
-/// error undercounted along the crossing. The directions are those the track's prior and the fresh
-/// noise differ most in (the prior's eigenvectors once the fresh noise is
-/// whitened); one difference has one.
+/// direction by direction ([`persistent::counted`]): two differences are
+/// not known alike, and taken over both at once (their traces, which the
+/// widest direction fills), the memory was the shorter one, and the
+/// persistent error undercounted along the crossing.
 fn with_persistent<const M: usize>(
     lin: Linear<M>,
     prior: &Gaussian,
@@ -146,68 +136,10 @@ fn with_persistent<const M: usize>(
         |v: [f64; 3]| SMatrix::<f64, M, M>::from_fn(|i, j| v[0] + if i == j { v[i + 1] } else { 0.0 });
     let state = lin.h * prior.p * lin.h.transpose();
     let once = pattern(persistent.map(|p| p.var_s2 * c2));
-    let counted = directions(&lin.r, &state).map_or_else(
-        // Not separable (a singular noise): the traces, as one direction.
-        || {
-            let n = Persistent::memory(state.trace(), lin.r.trace(), once.trace());
-            pattern(persistent.map(|p| p.counted(n) * c2))
-        },
-        |(t, t_inv, s)| {
-            // In the directions' basis the fresh noise is the identity.
-            let b = t * once * t.transpose();
-            let factor: [f64; M] = std::array::from_fn(|i| {
-                let n = Persistent::memory(s[i], 1.0, b[(i, i)]);
-                let c = t * pattern(persistent.map(|p| p.counted(n) * c2)) * t.transpose();
-                if b[(i, i)] > 0.0 {
-                    c[(i, i)] / b[(i, i)]
-                } else {
-                    1.0
-                }
-            });
-            let d = SMatrix::<f64, M, M>::from_fn(|i, j| b[(i, j)] * (factor[i] * factor[j]).sqrt());
-            t_inv * d * t_inv.transpose()
-        },
-    );
+    let counted =
+        super::persistent::counted(&lin.r, &state, &once, |n| pattern(persistent.map(|p| p.counted(n) * c2)));
     let r = lin.r + counted;
     lin.with_r(r)
-}
-
-/// The basis in which the fresh noise `r` is the identity and the prior
-/// `state` diagonal: the transform `t` (basis = t * differences), its
-/// inverse, and the prior's variances there.
-#[allow(clippy::type_complexity)]
-fn directions<const M: usize>(
-    r: &SMatrix<f64, M, M>,
-    state: &SMatrix<f64, M, M>,
-) -> Option<(SMatrix<f64, M, M>, SMatrix<f64, M, M>, [f64; M])> {
-    let l_inv = r.cholesky()?.l().try_inverse()?;
-    let (vectors, values) = symmetric_eigen(&(l_inv * state * l_inv.transpose()))?;
-    let t = vectors.transpose() * l_inv;
-    let t_inv = t.try_inverse()?;
-    Some((t, t_inv, values))
-}
-
-/// Eigenvectors (columns) and eigenvalues of a symmetric 1x1 or 2x2 matrix.
-#[allow(clippy::type_complexity)]
-fn symmetric_eigen<const M: usize>(a: &SMatrix<f64, M, M>) -> Option<(SMatrix<f64, M, M>, [f64; M])> {
-    match M {
-        1 => Some((SMatrix::identity(), std::array::from_fn(|_| a[(0, 0)]))),
-        2 => {
-            let (p, q, s) = (a[(0, 0)], a[(0, 1)], a[(1, 1)]);
-            let (mean, half) = ((p + s) / 2.0, ((p - s) / 2.0).hypot(q));
-            let values = [mean + half, mean - half];
-            // The first eigenvector at angle theta: tan 2 theta = 2q / (p - s).
-            let theta = 0.5 * (2.0 * q).atan2(p - s);
-            let (sn, cs) = theta.sin_cos();
-            let v = SMatrix::<f64, M, M>::from_fn(|i, j| match (i, j) {
-                (0, 0) | (1, 1) => cs,
-                (1, 0) => sn,
-                _ => -sn,
-            });
-            Some((v, std::array::from_fn(|i| values[i])))
-        }
-        _ => None,
-    }
 }
 
 #[cfg(test)]
@@ -239,16 +171,5 @@ mod tests {
         assert!(counted[(0, 1)].abs() < 1e-9, "{counted}");
         // The well-known direction remembers many more transmissions.
         assert!(counted[(0, 0)] > 4.0 * counted[(1, 1)], "{counted}");
-    }
-
-    #[test]
-    fn a_symmetric_two_by_two_has_its_eigenvectors() {
-        let a = Matrix2::new(5.0, 2.0, 2.0, 2.0);
-        let (v, values) = symmetric_eigen(&a).unwrap();
-        for (i, value) in values.iter().enumerate() {
-            let x = v.column(i).into_owned();
-            assert!((a * x - x * *value).norm() < 1e-12, "{i}: {x} {value}");
-        }
-        assert!(values[0] > values[1]);
     }
 }
