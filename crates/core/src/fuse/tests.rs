@@ -629,3 +629,57 @@ fn a_sync_error_that_stays_is_not_averaged_away_by_a_track() {
     let mean = nees_all.iter().sum::<f64>() / nees_all.len() as f64;
     assert!(mean < 2.5, "mean NEES {mean:.1} over {}", nees_all.len());
 }
+
+/// The same for a fix: an ADS-B aircraft's fixes whose clock synchronisation
+/// error stays (here half their variance, a bias of one sigma of it) are
+/// counted by its track's memory, the fuser saying how many share it; taken
+/// as fresh, the track averages them with its ADS-B and sits off.
+#[test]
+fn a_fixs_sync_error_that_stays_is_not_averaged_away_by_a_track() {
+    const ADSB_M: f64 = 38.0;
+    let (fix_m, share): (f64, f64) = (20.0, 0.5);
+    let mean_nees = |counted: bool| {
+        let mut f = Fuser::new(FuseConfig::default(), TrackConfig::default(), false);
+        let mut out = Vec::new();
+        let mut noise = rand::rngs::StdRng::seed_from_u64(11);
+        let bias = [fix_m * share.sqrt(), -fix_m * share.sqrt()];
+        let fresh_m = fix_m * (1.0 - share).sqrt();
+        let mut nees_all = Vec::new();
+        for k in 0..240 {
+            let t = 100.0 + 0.5 * k as f64;
+            let (lat0, lon0, _) = at(t);
+            let (e, n): (f64, f64) = (noise.sample(StandardNormal), noise.sample(StandardNormal));
+            let (lat, lon, _) = crate::geo::displace(lat0, lon0, 3000.0, [ADSB_M * e, ADSB_M * n, 0.0]);
+            let mut m = pos(t, lat, lon);
+            if let Observation::Position { cov_en, .. } = &mut m.obs {
+                *cov_en = Matrix2::identity() * ADSB_M * ADSB_M;
+            }
+            f.on_measurement(1, Some(8), m, t, &mut out);
+            if k % 2 == 1 {
+                let (e, n): (f64, f64) = (noise.sample(StandardNormal), noise.sample(StandardNormal));
+                let d = [bias[0] + fresh_m * e, bias[1] + fresh_m * n, 0.0];
+                let (lat, lon, _) = crate::geo::displace(lat0, lon0, 3000.0, d);
+                let mut m = Measurement { source: Source::Mlat, ..pos(t, lat, lon) };
+                if let Observation::Position { cov_en, persistent, .. } = &mut m.obs {
+                    *cov_en = Matrix2::identity() * fix_m * fix_m;
+                    // The fuser fills in how many fixes share it.
+                    persistent.share = if counted { share } else { 0.0 };
+                }
+                f.on_measurement(1, None, m, t, &mut out);
+            }
+            f.advance(t, &mut out);
+            for o in out.drain(..) {
+                let Output::Track(r) = o else { continue };
+                if r.est.t >= 130.0 {
+                    nees_all.push(nees(&r, at(r.est.t)));
+                }
+            }
+        }
+        assert!(nees_all.len() > 100, "{} estimates", nees_all.len());
+        nees_all.iter().sum::<f64>() / nees_all.len() as f64
+    };
+    let (counted, fresh) = (mean_nees(true), mean_nees(false));
+    eprintln!("a fix's lasting sync error: mean NEES counted {counted:.2}, taken as fresh {fresh:.2}");
+    assert!(counted < 3.0, "counted: mean NEES {counted:.2}");
+    assert!(fresh > 1.5 * counted, "taken as fresh: mean NEES {fresh:.2} against {counted:.2}");
+}
