@@ -579,6 +579,20 @@ fn reserved_track_numbers_are_taken_up_or_forgotten() {
     assert_eq!(f.track_numbers().1, 50, "new numbers still continue after the checkpoint's");
 }
 
+/// The test flight's ADS-B position at `t`, 38 m sigma per axis drawn and
+/// declared (NACp 8).
+fn noisy_adsb(t: f64, noise: &mut rand::rngs::StdRng) -> Measurement {
+    const ADSB_M: f64 = 38.0;
+    let (lat, lon, _) = at(t);
+    let (e, n): (f64, f64) = (noise.sample(StandardNormal), noise.sample(StandardNormal));
+    let (lat, lon, _) = crate::geo::displace(lat, lon, 3000.0, [ADSB_M * e, ADSB_M * n, 0.0]);
+    let mut m = pos(t, lat, lon);
+    if let Observation::Position { cov_en, .. } = &mut m.obs {
+        *cov_en = Matrix2::identity() * ADSB_M * ADSB_M;
+    }
+    m
+}
+
 /// An ADS-B aircraft (NACp 8) whose transmissions three receivers hear as
 /// time differences, one of them reaching the network through pair filters
 /// whose estimate is 150 ns off (45 m) for the whole flight, as its sync
@@ -590,22 +604,13 @@ fn reserved_track_numbers_are_taken_up_or_forgotten() {
 fn a_sync_error_that_stays_is_not_averaged_away_by_a_track() {
     let mut f = Fuser::new(FuseConfig::default(), TrackConfig::default(), false);
     let mut out = Vec::new();
-    const ADSB_M: f64 = 38.0;
     let (own_s, sync_s) = (50e-9, 150e-9);
     let mut noise = rand::rngs::StdRng::seed_from_u64(7);
     let mut nees_all = Vec::new();
     for k in 0..240 {
         let t = 100.0 + 0.5 * k as f64;
         if k % 2 == 0 {
-            // Its ADS-B, 38 m sigma as declared (NACp 8).
-            let (lat, lon, _) = at(t);
-            let (e, n): (f64, f64) = (noise.sample(StandardNormal), noise.sample(StandardNormal));
-            let (lat, lon, _) = crate::geo::displace(lat, lon, 3000.0, [ADSB_M * e, ADSB_M * n, 0.0]);
-            let mut m = pos(t, lat, lon);
-            if let Observation::Position { cov_en, .. } = &mut m.obs {
-                *cov_en = Matrix2::identity() * ADSB_M * ADSB_M;
-            }
-            f.on_measurement(1, Some(8), m, t, &mut out);
+            f.on_measurement(1, Some(8), noisy_adsb(t, &mut noise), t, &mut out);
         }
         let mut g = tdoa(1, t);
         for (i, s) in g.sites.iter_mut().enumerate() {
@@ -636,7 +641,6 @@ fn a_sync_error_that_stays_is_not_averaged_away_by_a_track() {
 /// as fresh, the track averages them with its ADS-B and sits off.
 #[test]
 fn a_fixs_sync_error_that_stays_is_not_averaged_away_by_a_track() {
-    const ADSB_M: f64 = 38.0;
     let (fix_m, share): (f64, f64) = (20.0, 0.5);
     let mean_nees = |counted: bool| {
         let mut f = Fuser::new(FuseConfig::default(), TrackConfig::default(), false);
@@ -647,15 +651,9 @@ fn a_fixs_sync_error_that_stays_is_not_averaged_away_by_a_track() {
         let mut nees_all = Vec::new();
         for k in 0..240 {
             let t = 100.0 + 0.5 * k as f64;
-            let (lat0, lon0, _) = at(t);
-            let (e, n): (f64, f64) = (noise.sample(StandardNormal), noise.sample(StandardNormal));
-            let (lat, lon, _) = crate::geo::displace(lat0, lon0, 3000.0, [ADSB_M * e, ADSB_M * n, 0.0]);
-            let mut m = pos(t, lat, lon);
-            if let Observation::Position { cov_en, .. } = &mut m.obs {
-                *cov_en = Matrix2::identity() * ADSB_M * ADSB_M;
-            }
-            f.on_measurement(1, Some(8), m, t, &mut out);
+            f.on_measurement(1, Some(8), noisy_adsb(t, &mut noise), t, &mut out);
             if k % 2 == 1 {
+                let (lat0, lon0, _) = at(t);
                 let (e, n): (f64, f64) = (noise.sample(StandardNormal), noise.sample(StandardNormal));
                 let d = [bias[0] + fresh_m * e, bias[1] + fresh_m * n, 0.0];
                 let (lat, lon, _) = crate::geo::displace(lat0, lon0, 3000.0, d);

@@ -33,7 +33,7 @@ impl Track {
         // The report's time error moves it along the velocity.
         let v = pred.x.fixed_rows::<2>(2).into_owned();
         let nominal = cov_en + v * v.transpose() * (time_sigma_s * time_sigma_s);
-        let nominal = with_shared(nominal, &cov_en, &(kf::h() * pred.p * kf::h().transpose()), persistent);
+        let nominal = with_shared(nominal, &cov_en, &pred.p, persistent);
         let noise = &mut self.state.noise[source as usize];
         if self.cfg.vb {
             let (rho, prior) = match source {
@@ -218,20 +218,23 @@ impl Track {
 }
 
 /// The `nominal` noise of a position with its `persistent` share of
-/// `cov_en` counted as often as the track's memory (its prior `state` in
-/// the plane) holds positions, at most as often as it is shared
-/// ([`super::persistent::counted`]); the rest taken as the position's own.
+/// `cov_en` counted as often as the track's memory (its prior covariance
+/// `prior_p`, taken to the plane's position) holds positions, at most as
+/// often as it is shared ([`super::persistent::counted`]); the rest taken as
+/// the position's own. Nothing is computed for a position with no share
+/// (every ADS-B one).
 fn with_shared(
     nominal: Matrix2<f64>,
     cov_en: &Matrix2<f64>,
-    state: &Matrix2<f64>,
+    prior_p: &Matrix6<f64>,
     persistent: SharedShare,
 ) -> Matrix2<f64> {
     if !persistent.share.is_finite() || persistent.share <= 0.0 {
         return nominal;
     }
+    let state = kf::h() * prior_p * kf::h().transpose();
     let once = cov_en * persistent.share.min(1.0);
     let fresh = nominal - once;
     let shared_by = persistent.shared_by.max(1.0);
-    fresh + super::persistent::counted(&fresh, state, &once, |n| once * n.min(shared_by).max(1.0))
+    fresh + super::persistent::counted(&fresh, &state, &once, |n| once * n.min(shared_by).max(1.0))
 }
