@@ -467,6 +467,20 @@ fn alerts_covered(single: &Path, cluster: &Path) {
     }
 }
 
+/// The partitions each worker held when it was stopped, after checking its
+/// counts add up: what it took, less what it handed back or lost.
+///
+/// How often partitions moved on the way depends on the scheduling: a
+/// worker that starts late, or is starved past its lease on two busy
+/// cores, has the others share and share again. Where they end does not.
+fn held(workers: &[BTreeMap<String, u64>]) -> Vec<u64> {
+    for w in workers {
+        let moved = w["partitions_handed_back"] + w["partitions_lost"];
+        assert_eq!(w["partitions_taken"], w["partitions_held"] + moved, "{w:?}");
+    }
+    workers.iter().map(|w| w["partitions_held"]).collect()
+}
+
 fn within(a: f64, b: f64, share: f64) -> bool {
     (a - b).abs() <= share * b
 }
@@ -556,10 +570,8 @@ fn a_cluster_of_processes_tracks_as_one_node_does_and_survives_a_killed_worker()
             assert_eq!(numbers.len(), 1, "{name}: {hex} numbered {numbers:?}");
         }
         match fault {
-            // The two left took four partitions at the start and two of the lost one's each.
-            Fault::KillWorker(_) => {
-                assert!(run.workers.iter().all(|w| w["partitions_taken"] == 6), "{:?}", run.workers)
-            }
+            // The two left hold the lost one's partitions as well: six each.
+            Fault::KillWorker(_) => assert_eq!(held(&run.workers), vec![6, 6], "{:?}", run.workers),
             // The outage was met (stores sent again) and outlived: every
             // process ended well, nothing lost (above).
             Fault::RestartNats(_) => {
@@ -568,15 +580,17 @@ fn a_cluster_of_processes_tracks_as_one_node_does_and_survives_a_killed_worker()
                     + run.publisher["nats_retries"]
                     + run.workers.iter().map(|w| w["nats_retries"]).sum::<u64>();
                 assert!(retries > 0, "the restart went unnoticed");
+                assert_eq!(held(&run.workers), vec![4, 4, 4], "{:?}", run.workers);
             }
-            // The two at the start held six partitions each and handed two
-            // each back to the third, which took those four.
+            // The two at the start handed partitions back to the third
+            // (two each, when every worker started in time and none was
+            // starved of its renewals): four each in the end.
             Fault::JoinWorker(_) => {
-                let taken: Vec<u64> = run.workers.iter().map(|w| w["partitions_taken"]).collect();
-                let back: Vec<u64> = run.workers.iter().map(|w| w["partitions_handed_back"]).collect();
-                assert_eq!((taken, back), (vec![6, 6, 4], vec![2, 2, 0]), "{:?}", run.workers);
+                assert_eq!(held(&run.workers), vec![4, 4, 4], "{:?}", run.workers);
+                let moved = |w: &BTreeMap<String, u64>| w["partitions_handed_back"] + w["partitions_lost"];
+                assert!(run.workers.iter().map(moved).sum::<u64>() >= 4, "{:?}", run.workers);
             }
-            Fault::None => {}
+            Fault::None => assert_eq!(held(&run.workers), vec![4, 4, 4], "{:?}", run.workers),
         }
     }
     drop(nats);

@@ -95,6 +95,11 @@ pub struct WorkerStats {
     pub partitions_taken: u64,
     /// Partitions handed back to a worker that joined.
     pub partitions_handed_back: u64,
+    /// Claims found taken by another worker (this one missed its renewals:
+    /// starved, or cut off from NATS longer than a lease).
+    pub partitions_lost: u64,
+    /// Partitions held now.
+    pub partitions_held: u64,
     /// Batches delivered again after a consumer was made again (skipped).
     pub redelivered: u64,
 }
@@ -104,7 +109,7 @@ impl std::fmt::Display for WorkerStats {
         write!(
             f,
             "worker: batches={} frames={} bad_batches={} sync_updates={} sync_notes={} partitions_taken={} \
-             partitions_handed_back={} receiver_records_dropped={} redelivered={} nats_retries={}",
+             partitions_handed_back={} partitions_lost={} partitions_held={} receiver_records_dropped={} redelivered={} nats_retries={}",
             self.batches,
             self.frames,
             self.bad_batches,
@@ -112,6 +117,8 @@ impl std::fmt::Display for WorkerStats {
             self.sync_notes,
             self.partitions_taken,
             self.partitions_handed_back,
+            self.partitions_lost,
+            self.partitions_held,
             self.receiver_records,
             self.redelivered,
             super::outage::retries()
@@ -149,6 +156,12 @@ struct Processor {
 }
 
 impl Processor {
+    /// The counts as the process prints them when it ends.
+    fn show(&mut self) {
+        self.stats.partitions_held = self.parts.len() as u64;
+        *self.shown.lock().expect("stats lock") = self.stats;
+    }
+
     fn handle(&mut self, m: ToCore) {
         match m {
             ToCore::Clock(s) => self.latest = Some(s),
@@ -185,9 +198,13 @@ impl Processor {
                 };
                 self.parts.insert(p, part);
                 self.stats.partitions_taken += 1;
+                self.show();
             }
             ToCore::Drop(p) => {
-                self.parts.remove(&p);
+                if self.parts.remove(&p).is_some() {
+                    self.stats.partitions_lost += 1;
+                    self.show();
+                }
             }
             ToCore::Release(p) => {
                 // Its batches still waiting go unacknowledged: the next
@@ -197,12 +214,13 @@ impl Processor {
                     let bytes = wire::encode(&Checkpoint { ids, next_id });
                     let _ = self.out.send(FromCore::Checkpoint { p, bytes });
                     self.stats.partitions_handed_back += 1;
+                    self.show();
                 }
                 let _ = self.out.send(FromCore::Released(p));
             }
             ToCore::Bad => {
                 self.stats.bad_batches += 1;
-                *self.shown.lock().expect("stats lock") = self.stats;
+                self.show();
             }
             ToCore::Batch(b) => {
                 if let Some(part) = self.parts.get_mut(&b.p) {
@@ -311,7 +329,7 @@ impl Processor {
         let done =
             FromCore::Done { p, seq: b.seq, t: b.t, end: b.end, frames, events, sync, msg: Box::new(b.msg) };
         let _ = self.out.send(done);
-        *self.shown.lock().expect("stats lock") = self.stats;
+        self.show();
     }
 
     fn run(mut self, input: mpsc::Receiver<ToCore>) {
