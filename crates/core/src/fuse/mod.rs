@@ -19,17 +19,20 @@
 //! speeds beyond 1,200 m/s, times far from now): rejected and counted.
 //!
 //! Here: the aircraft table and the [`Fuser`] that feeds, fuses and
-//! publishes; beside it one measurement into an aircraft's tracks
-//! (`tracks.rs`), a publication made (`publication.rs`), the configuration
+//! publishes; beside it an aircraft of the table and how it starts
+//! (`aircraft.rs`), the checks a measurement passes first (`intake.rs`),
+//! one measurement into an aircraft's tracks (`tracks.rs`), a publication made (`publication.rs`), the configuration
 //! (`config.rs`), what is published (`records.rs`), the MLAT hold's queue
 //! (`hold.rs`), the particle filter's aircraft (`sparse.rs`), the fusion methods
 //! ([`methods`]), conflict prediction ([`conflict`]) and the ADS-B
 //! conformance monitor ([`conformance`]).
 
+mod aircraft;
 mod config;
 pub mod conflict;
 pub mod conformance;
 mod hold;
+mod intake;
 pub mod methods;
 pub mod monitor;
 mod publication;
@@ -46,16 +49,16 @@ use std::sync::Arc;
 use nalgebra::{Matrix2, Vector2};
 
 use crate::mlat::engine::TdoaGroup;
-use crate::recent::RecentCount;
 use crate::track::imm::ImmSpec;
 use crate::track::motion::{Fix2, Motion, MotionTest};
-use crate::track::particle::{SparseTrack, VelocityOutcome};
+use crate::track::particle::VelocityOutcome;
 use crate::track::plane::Plane;
 use crate::track::{Estimate, Measurement, Observation, Outcome, Persistent, Source, Track, TrackConfig};
+use aircraft::{fresh_tracks, Aircraft};
 pub use config::FuseConfig;
 pub use conflict::ConflictConfig;
 pub use conformance::ConformanceConfig;
-use hold::{Waiting, MAX_WAITING};
+use hold::MAX_WAITING;
 pub use methods::{Cross, Method};
 pub use monitor::ConflictMonitor;
 pub use records::{Alert, FuseStats, Output, Sources, SparseStats, TrackReport, TrackSource};
@@ -71,77 +74,8 @@ pub const MIN_CONFLICT_SPEED_MPS: f64 = 30.0;
 /// share (a receiver's learnt offset) adds up in its estimate.
 const TDOA_SPAN_S: f64 = 30.0;
 
-/// An aircraft's tracks as they start: the fused one and the single-source
-/// ones (which keep each update's gain for the information method), on the
-/// MLAT-only models until its ADS-B is heard.
-fn fresh_tracks(tcfg: &Arc<TrackConfig>, spec: &Arc<ImmSpec>, method: Method) -> (Track, [Track; 2]) {
-    let fused = Track::new(tcfg.clone(), spec.clone());
-    let mut single = fused.clone();
-    single.keep_gain = method == Method::Information;
-    (fused, [single.clone(), single])
-}
-
 /// Speed no aircraft reaches (m/s).
 pub const MAX_SPEED_MPS: f64 = 1_200.0;
-
-/// Estimates taken at the publication time (fused; ADS-B, MLAT).
-#[derive(Default)]
-struct Taken {
-    fused: Option<Estimate>,
-    single: [Option<Estimate>; 2],
-}
-
-struct Aircraft {
-    id: u64,
-    fused: Track,
-    single: [Track; 2],
-    /// Data time of the newest measurement from each source.
-    last_source_t: [f64; 2],
-    /// Arrival time the aircraft was last heard.
-    last_heard: f64,
-    next_due: f64,
-    /// Time of applicability waiting to be published.
-    pending: Option<f64>,
-    /// The tracks' estimates at `pending`, taken when they stood there
-    /// (see [`Fuser::apply`]).
-    taken: Taken,
-    /// Measurements waiting for the MLAT hold.
-    waiting: Waiting,
-    nac_p: Option<u8>,
-    alt_baro_ft: Option<i32>,
-    flight: Option<Arc<str>>,
-    squawk: Option<u16>,
-    nav_altitude_ft: Option<u32>,
-    /// Its latest height (WGS-84 m) from an altitude reply, and when.
-    height: Option<(f64, f64)>,
-    /// The particle filter while it has no position, and its next publication.
-    sparse: Option<Box<SparseTrack>>,
-    sparse_due: f64,
-    /// When its groups first came too small for a fix while it had no position.
-    sparse_since: Option<f64>,
-    /// The cloud's estimates in a row that had one mode and were tight
-    /// enough to publish: at `sparse.handover_after` the tracks start from it.
-    sparse_publishable: u32,
-    /// Its tracks started from a particle cloud and have had no fix since:
-    /// published flagged `sparse`, and given back to a new cloud if the time
-    /// differences keep missing them.
-    sparse_geometry: bool,
-    sparse_gated: u32,
-    /// Its transmissions taken as time differences, faded over [`TDOA_SPAN_S`].
-    tdoa_recent: RecentCount,
-    /// Its fixes whose clock synchronisation error persists, faded likewise.
-    fix_recent: RecentCount,
-    motion: MotionTest,
-    motion_plane: Option<Plane>,
-    motion_state: Motion,
-    motion_t: f64,
-    in_conflict: bool,
-    /// An ADS-B measurement has been taken: the tracks use `Fuser::spec`.
-    adsb_heard: bool,
-    adsb_suspect: bool,
-    surface: bool,
-    cross: Cross,
-}
 
 pub struct Fuser {
     cfg: FuseConfig,
@@ -265,59 +199,7 @@ impl Fuser {
         }
     }
 
-    fn valid(&mut self, m: &Measurement, now: f64) -> bool {
-        let finite = m.t.is_finite()
-            && match m.obs {
-                Observation::Position { lat, lon, cov_en, height, time_sigma_s, .. } => {
-                    lat.is_finite()
-                        && lon.is_finite()
-                        && lat.abs() <= 90.0
-                        && cov_en.iter().all(|v| v.is_finite())
-                        && cov_en.cholesky().is_some()
-                        && height.is_none_or(|(h, v)| h.is_finite() && v > 0.0 && v.is_finite())
-                        && time_sigma_s.is_finite()
-                }
-                Observation::Velocity { v_en, cov, climb } => {
-                    v_en.iter().all(|v| v.is_finite())
-                        && cov.cholesky().is_some()
-                        && climb.is_none_or(|(c, v)| c.is_finite() && v > 0.0 && v.is_finite())
-                }
-                Observation::Height { h: z, var } | Observation::Climb { rate: z, var } => {
-                    z.is_finite() && var > 0.0 && var.is_finite()
-                }
-                Observation::Tdoa { n, sites, persistent } => {
-                    (2..=3).contains(&n)
-                        && sites[..n as usize].iter().all(|(p, t, s)| {
-                            p.iter().all(|v| v.is_finite()) && t.is_finite() && *s > 0.0 && s.is_finite()
-                        })
-                        && persistent[..n as usize].iter().all(|p| {
-                            p.var_s2.is_finite()
-                                && p.var_s2 >= 0.0
-                                && p.shared_by.is_finite()
-                                && p.shared_by >= 1.0
-                        })
-                }
-            };
-        if !finite {
-            self.stats.rejected_non_finite += 1;
-            return false;
-        }
-        if (m.t - now).abs() > self.cfg.max_time_error_s {
-            self.stats.rejected_time += 1;
-            return false;
-        }
-        if let Observation::Velocity { v_en, .. } = m.obs {
-            if v_en.norm() > MAX_SPEED_MPS {
-                self.stats.rejected_speed += 1;
-                return false;
-            }
-        }
-        true
-    }
-
     /// A measurement of aircraft `addr`, at arrival time `now`.
-    // Over 80 lines: the per-measurement checks and the MLAT hold's
-    // branches, in the order they apply.
     pub fn on_measurement(
         &mut self,
         addr: u32,
@@ -327,7 +209,7 @@ impl Fuser {
         out: &mut Vec<Output>,
     ) {
         self.stats.measurements += 1;
-        if !self.valid(&m, now) {
+        if !intake::valid(&m, now, self.cfg.max_time_error_s, &mut self.stats) {
             return;
         }
         if !self.aircraft.contains_key(&addr) {
@@ -339,45 +221,9 @@ impl Fuser {
                 self.next_id += self.id_step;
                 self.next_id - self.id_step
             });
-            let (fused, single) = fresh_tracks(&self.tcfg, &self.spec_mlat_only, self.cfg.method);
+            let tracks = fresh_tracks(&self.tcfg, &self.spec_mlat_only, self.cfg.method);
             self.stats.tracks_created += 1;
-            self.aircraft.insert(
-                addr,
-                Box::new(Aircraft {
-                    id,
-                    fused,
-                    single,
-                    last_source_t: [f64::NEG_INFINITY; 2],
-                    last_heard: now,
-                    next_due: f64::NEG_INFINITY,
-                    pending: None,
-                    taken: Taken::default(),
-                    waiting: Waiting::default(),
-                    nac_p: None,
-                    alt_baro_ft: None,
-                    flight: None,
-                    squawk: None,
-                    nav_altitude_ft: None,
-                    height: None,
-                    sparse: None,
-                    sparse_due: f64::NEG_INFINITY,
-                    sparse_since: None,
-                    sparse_publishable: 0,
-                    sparse_geometry: false,
-                    sparse_gated: 0,
-                    tdoa_recent: RecentCount::default(),
-                    fix_recent: RecentCount::default(),
-                    motion: self.motion.clone(),
-                    motion_plane: None,
-                    motion_state: Motion::Unknown,
-                    motion_t: f64::NEG_INFINITY,
-                    in_conflict: false,
-                    adsb_heard: false,
-                    adsb_suspect: false,
-                    surface: false,
-                    cross: Cross::new(),
-                }),
-            );
+            self.aircraft.insert(addr, Box::new(Aircraft::new(id, tracks, now, self.motion.clone())));
         }
         let a = self.aircraft.get_mut(&addr).expect("inserted");
         a.last_heard = now;
