@@ -22,9 +22,10 @@ use anyhow::{Context, Result};
 use async_nats::jetstream::kv;
 use futures_util::StreamExt;
 
+use super::consume::keep_consuming;
 use super::outage::retry;
 use super::wire::{self, Checkpoint};
-use super::worker::{keep_consuming, ToCore};
+use super::worker::ToCore;
 use super::{ClusterConfig, Nats};
 
 /// The processing's word that a partition handed back has its results

@@ -34,6 +34,7 @@
 
 mod claims;
 pub mod clock;
+mod consume;
 pub mod ingest;
 pub mod outage;
 pub mod publisher;
