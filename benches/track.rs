@@ -39,6 +39,7 @@ fn position(lat: f64, lon: f64) -> fuse1090::track::Observation {
         surface: false,
         claimed: true,
         persistent: fuse1090::track::SharedShare::default(),
+        adsb_echo: 0.0,
     }
 }
 

@@ -10,7 +10,7 @@ use crate::track::{Measurement, Observation};
 pub(super) fn valid(m: &Measurement, now: f64, max_time_error_s: f64, stats: &mut FuseStats) -> bool {
     let finite = m.t.is_finite()
         && match m.obs {
-            Observation::Position { lat, lon, cov_en, height, time_sigma_s, .. } => {
+            Observation::Position { lat, lon, cov_en, height, time_sigma_s, adsb_echo, .. } => {
                 lat.is_finite()
                     && lon.is_finite()
                     && lat.abs() <= 90.0
@@ -18,6 +18,7 @@ pub(super) fn valid(m: &Measurement, now: f64, max_time_error_s: f64, stats: &mu
                     && cov_en.cholesky().is_some()
                     && height.is_none_or(|(h, v)| h.is_finite() && v > 0.0 && v.is_finite())
                     && time_sigma_s.is_finite()
+                    && (0.0..=1.0).contains(&adsb_echo)
             }
             Observation::Velocity { v_en, cov, climb } => {
                 v_en.iter().all(|v| v.is_finite())

@@ -20,6 +20,7 @@ pub(super) fn pos(t: f64, lat: f64, lon: f64) -> Measurement {
             surface: false,
             claimed: true,
             persistent: crate::track::SharedShare::default(),
+            adsb_echo: 0.0,
         },
     }
 }
@@ -58,6 +59,7 @@ fn impossible_measurements_are_rejected_and_counted() {
             surface: false,
             claimed: true,
             persistent: crate::track::SharedShare::default(),
+            adsb_echo: 0.0,
         },
         ..pos(100.0, 45.0, 5.0)
     };
@@ -157,6 +159,7 @@ fn multilaterated(mlat_only: bool, seed: u64, adsb_first: bool, suspect: bool) -
                 surface: false,
                 claimed: true,
                 persistent: crate::track::SharedShare::default(),
+                adsb_echo: 0.0,
             },
             ..pos(t, lat, lon)
         };
@@ -511,4 +514,47 @@ fn a_fixs_sync_error_that_stays_is_not_averaged_away_by_a_track() {
     eprintln!("a fix's lasting sync error: mean NEES counted {counted:.2}, taken as fresh {fresh:.2}");
     assert!(counted < 3.0, "counted: mean NEES {counted:.2}");
     assert!(fresh > 1.5 * counted, "taken as fresh: mean NEES {fresh:.2} against {counted:.2}");
+}
+
+/// An ADS-B aircraft's fixes from clocks synchronised on its own ADS-B
+/// (`adsb_echo` 0.9): the fused track, which has that ADS-B, counts only
+/// the tenth that is news; its MLAT-only track, which has no ADS-B, takes
+/// each fix at its covariance. Inflated there too, that track's NEES was a
+/// fraction of its 2 (the MLAT-only tracks of every world underconfident,
+/// most on the sparse networks, where each aircraft's ADS-B synchronises
+/// its own receivers' clocks).
+#[test]
+fn a_fix_echoing_its_aircrafts_adsb_is_news_to_the_mlat_only_track() {
+    let fix_m = 60.0;
+    let mut f = Fuser::new(FuseConfig::default(), TrackConfig::default(), true);
+    let (mut out, mut noise) = (Vec::new(), rand::rngs::StdRng::seed_from_u64(13));
+    let mut nees_by: [Vec<f64>; 3] = Default::default();
+    for k in 0..360 {
+        let t = 100.0 + 0.5 * k as f64;
+        f.on_measurement(1, Some(8), noisy_adsb(t, &mut noise), t, &mut out);
+        if k % 2 == 1 {
+            let (lat0, lon0, _) = at(t);
+            let (e, n): (f64, f64) = (noise.sample(StandardNormal), noise.sample(StandardNormal));
+            let (lat, lon, _) = crate::geo::displace(lat0, lon0, 3000.0, [fix_m * e, fix_m * n, 0.0]);
+            let mut m = Measurement { source: Source::Mlat, ..pos(t, lat, lon) };
+            if let Observation::Position { cov_en, adsb_echo, .. } = &mut m.obs {
+                *cov_en = Matrix2::identity() * fix_m * fix_m;
+                *adsb_echo = 0.9;
+            }
+            f.on_measurement(1, None, m, t, &mut out);
+        }
+        f.advance(t, &mut out);
+        for o in out.drain(..) {
+            let Output::Track(r) = o else { continue };
+            if r.est.t >= 130.0 {
+                nees_by[r.source as usize].push(nees(&r, at(r.est.t)));
+            }
+        }
+    }
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    let mlat = &nees_by[TrackSource::Mlat as usize];
+    assert!(mlat.len() > 100, "{} MLAT-only estimates", mlat.len());
+    let (mlat_nees, fused_nees) = (mean(mlat), mean(&nees_by[TrackSource::Fused as usize]));
+    assert!((1.4..2.8).contains(&mlat_nees), "MLAT-only track: mean NEES {mlat_nees:.2}");
+    assert!(fused_nees < 2.8, "fused track: mean NEES {fused_nees:.2}");
 }

@@ -25,9 +25,12 @@ impl Fuser {
         }
         // A flagged aircraft's ADS-B stays out of the fused track.
         let into_fused = !(a.adsb_suspect && m.source == Source::Adsb);
+        let echo_counted = without_echo(m);
         let outcome = if into_fused {
             self.stats.reruns += (m.t < a.fused.t()) as u64;
-            a.fused.apply(m)
+            // Its ADS-B is in the fused track (unless flagged, when no clock
+            // is synchronised on it either).
+            a.fused.apply(if a.adsb_suspect { m } else { echo_counted })
         } else {
             self.stats.suspect_excluded += 1;
             Outcome::Early
@@ -35,7 +38,10 @@ impl Fuser {
         // Single-source tracks cost as much as the fused one: run only when
         // a track-to-track method or their publication needs them.
         let single = if self.singles {
-            a.single[m.source as usize].apply(m)
+            // The MLAT-only track has no ADS-B: the echo is news to it,
+            // unless a track-to-track method fuses it with the ADS-B track.
+            let t2t = self.cfg.method != Method::Measurement;
+            a.single[m.source as usize].apply(if t2t { echo_counted } else { m })
         } else if into_fused {
             outcome
         } else {
@@ -126,4 +132,20 @@ impl Fuser {
         let en = plane.to_en(lat, lon);
         a.motion_state = a.motion.push(Fix2 { pos: Vector2::new(en[0], en[1]), cov });
     }
+}
+
+/// The least share of a fix's timing variance counted as independent of
+/// its aircraft's ADS-B (a 100-fold inflation at most).
+const MIN_INDEPENDENT_SHARE: f64 = 0.01;
+
+/// A position as a track that has the aircraft's ADS-B counts it: what
+/// repeats that ADS-B (`adsb_echo`) is no news, so only the rest is counted
+/// (its covariance inflated by the inverse of the rest's share).
+fn without_echo(mut m: Measurement) -> Measurement {
+    if let Observation::Position { cov_en, adsb_echo, .. } = &mut m.obs {
+        if *adsb_echo > 0.0 {
+            *cov_en /= (1.0 - *adsb_echo).max(MIN_INDEPENDENT_SHARE);
+        }
+    }
+    m
 }

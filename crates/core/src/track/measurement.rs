@@ -40,6 +40,10 @@ pub enum Observation {
         /// The share of `cov_en` that is the same in the aircraft's next
         /// positions too (an MLAT fix's clock synchronisation error).
         persistent: SharedShare,
+        /// The share of `cov_en` that repeats the aircraft's own ADS-B
+        /// errors (an MLAT fix from clocks synchronised on its ADS-B
+        /// positions), 0 to 1: news only to a track without that ADS-B.
+        adsb_echo: f64,
     },
     /// Ground velocity (east, north m/s, covariance) and climb rate (m/s, variance).
     Velocity { v_en: Vector2<f64>, cov: Matrix2<f64>, climb: Option<(f64, f64)> },

@@ -15,6 +15,7 @@ fn pos(t: f64, lat: f64, lon: f64, sigma: f64) -> Measurement {
             surface: false,
             claimed: true,
             persistent: SharedShare::default(),
+            adsb_echo: 0.0,
         },
     }
 }

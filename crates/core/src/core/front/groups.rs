@@ -5,9 +5,6 @@
 
 use super::*;
 
-/// The least share of a fix's timing variance counted as independent of
-/// its aircraft's ADS-B (a 100-fold inflation at most).
-const MIN_INDEPENDENT_SHARE: f64 = 0.01;
 /// Vertical sigma (m) of a reported position's height: its 25 ft steps
 /// and the GNSS-baro difference's error; and of a height from barometric
 /// altitude alone, without that difference.
@@ -32,17 +29,13 @@ impl GroupCtx<'_> {
         // monitor, which weighs fixes against ADS-B one by one, takes them
         // inflated; a track counts them by its own memory (the share).
         let inflation = 1.0 + fix.sync_share * (self.sync_inflation - 1.0);
-        // What clocks synchronised on this aircraft's own ADS-B put in the
-        // fix is its ADS-B errors again: only the rest is news to a track
-        // that has its ADS-B, so only the rest is counted.
-        let own = 1.0 / (1.0 - fix.self_sync_share).max(MIN_INDEPENDENT_SHARE);
         let m = Measurement {
             t: fix.t,
             source: Source::Mlat,
             obs: Observation::Position {
                 lat: fix.lat,
                 lon: fix.lon,
-                cov_en: nalgebra::Matrix2::new(c[0][0], c[0][1], c[1][0], c[1][1]) * own,
+                cov_en: nalgebra::Matrix2::new(c[0][0], c[0][1], c[1][0], c[1][1]),
                 // Heights come from altitude reports: a fix's own height is
                 // either the barometric one it was given, or (without one)
                 // so poorly determined that its linearised sigma cannot be
@@ -53,6 +46,10 @@ impl GroupCtx<'_> {
                 claimed: true,
                 // How many fixes share it is the fuser's to say.
                 persistent: SharedShare { share: fix.sync_share.clamp(0.0, 1.0), shared_by: 1.0 },
+                // What clocks synchronised on this aircraft's own ADS-B put
+                // in the fix is its ADS-B errors again: the fuser counts only
+                // the rest in a track that has its ADS-B.
+                adsb_echo: fix.self_sync_share.clamp(0.0, 1.0),
             },
         };
         let (addr, t) = (fix.addr, fix.t);

@@ -51,6 +51,7 @@ impl Front {
                     surface: p.surface,
                     claimed: p.nac_p.is_some_and(|n| n > 0),
                     persistent: SharedShare::default(),
+                    adsb_echo: 0.0,
                 },
             };
             out.push(Cmd::Measure { addr, nac_p: p.nac_p, m, now: arrival });
