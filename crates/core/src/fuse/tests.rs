@@ -427,6 +427,26 @@ fn noisy_adsb(t: f64, noise: &mut rand::rngs::StdRng) -> Measurement {
     m
 }
 
+/// An MLAT fix of the test flight at `t`, `bias` (east, north m) plus
+/// `fresh_m` per axis drawn off, declared `sigma_m` per axis.
+fn fix_off(
+    t: f64,
+    bias: [f64; 2],
+    fresh_m: f64,
+    sigma_m: f64,
+    noise: &mut rand::rngs::StdRng,
+) -> Measurement {
+    let (lat0, lon0, _) = at(t);
+    let (e, n): (f64, f64) = (noise.sample(StandardNormal), noise.sample(StandardNormal));
+    let d = [bias[0] + fresh_m * e, bias[1] + fresh_m * n, 0.0];
+    let (lat, lon, _) = crate::geo::displace(lat0, lon0, 3000.0, d);
+    let mut m = Measurement { source: Source::Mlat, ..pos(t, lat, lon) };
+    if let Observation::Position { cov_en, .. } = &mut m.obs {
+        *cov_en = Matrix2::identity() * sigma_m * sigma_m;
+    }
+    m
+}
+
 /// An ADS-B aircraft (NACp 8) whose transmissions three receivers hear as
 /// time differences, one of them reaching the network through pair filters
 /// whose estimate is 150 ns off (45 m) for the whole flight, as its sync
@@ -487,13 +507,8 @@ fn a_fixs_sync_error_that_stays_is_not_averaged_away_by_a_track() {
             let t = 100.0 + 0.5 * k as f64;
             f.on_measurement(1, Some(8), noisy_adsb(t, &mut noise), t, &mut out);
             if k % 2 == 1 {
-                let (lat0, lon0, _) = at(t);
-                let (e, n): (f64, f64) = (noise.sample(StandardNormal), noise.sample(StandardNormal));
-                let d = [bias[0] + fresh_m * e, bias[1] + fresh_m * n, 0.0];
-                let (lat, lon, _) = crate::geo::displace(lat0, lon0, 3000.0, d);
-                let mut m = Measurement { source: Source::Mlat, ..pos(t, lat, lon) };
-                if let Observation::Position { cov_en, persistent, .. } = &mut m.obs {
-                    *cov_en = Matrix2::identity() * fix_m * fix_m;
+                let mut m = fix_off(t, bias, fresh_m, fix_m, &mut noise);
+                if let Observation::Position { persistent, .. } = &mut m.obs {
                     // The fuser fills in how many fixes share it.
                     persistent.share = if counted { share } else { 0.0 };
                 }
@@ -533,12 +548,8 @@ fn a_fix_echoing_its_aircrafts_adsb_is_news_to_the_mlat_only_track() {
         let t = 100.0 + 0.5 * k as f64;
         f.on_measurement(1, Some(8), noisy_adsb(t, &mut noise), t, &mut out);
         if k % 2 == 1 {
-            let (lat0, lon0, _) = at(t);
-            let (e, n): (f64, f64) = (noise.sample(StandardNormal), noise.sample(StandardNormal));
-            let (lat, lon, _) = crate::geo::displace(lat0, lon0, 3000.0, [fix_m * e, fix_m * n, 0.0]);
-            let mut m = Measurement { source: Source::Mlat, ..pos(t, lat, lon) };
-            if let Observation::Position { cov_en, adsb_echo, .. } = &mut m.obs {
-                *cov_en = Matrix2::identity() * fix_m * fix_m;
+            let mut m = fix_off(t, [0.0, 0.0], fix_m, fix_m, &mut noise);
+            if let Observation::Position { adsb_echo, .. } = &mut m.obs {
                 *adsb_echo = 0.9;
             }
             f.on_measurement(1, None, m, t, &mut out);
