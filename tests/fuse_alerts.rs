@@ -14,14 +14,20 @@ fn scenario(name: &str) -> Scenario {
     Scenario::load(&p).unwrap()
 }
 
-/// Simulates and runs the default pipeline: (records, truth lines).
-fn run(s: &Scenario) -> (Vec<Value>, Vec<Value>) {
+/// Simulates and runs the default pipeline: (track stream, truth), as written.
+fn simulate_and_run(s: &Scenario) -> (Vec<u8>, Vec<u8>) {
     let (mut capture, mut truth) = (Vec::new(), Vec::new());
     fuse1090::sim::simulate(s, &mut capture, &mut truth).unwrap();
-    let out = run_in_memory(&capture, &Config::default().core).unwrap();
-    let parse = |b: &[u8]| -> Vec<Value> {
-        String::from_utf8_lossy(b).lines().map(|l| serde_json::from_str(l).unwrap()).collect()
-    };
+    (run_in_memory(&capture, &Config::default().core).unwrap(), truth)
+}
+
+fn parse(b: &[u8]) -> Vec<Value> {
+    String::from_utf8_lossy(b).lines().map(|l| serde_json::from_str(l).unwrap()).collect()
+}
+
+/// Simulates and runs the default pipeline: (records, truth lines).
+fn run(s: &Scenario) -> (Vec<Value>, Vec<Value>) {
+    let (out, truth) = simulate_and_run(s);
     (parse(&out), parse(&truth))
 }
 
@@ -167,12 +173,9 @@ fn tma_busy_both_spoofers_flagged_and_no_honest_aircraft() {
 fn a_spoofer_at_the_edge_of_coverage_stays_flagged() {
     let mut s = scenario("tma-busy");
     s.seed = 1;
-    let (mut capture, mut truth) = (Vec::new(), Vec::new());
-    fuse1090::sim::simulate(&s, &mut capture, &mut truth).unwrap();
-    let out = run_in_memory(&capture, &Config::default().core).unwrap();
+    let (out, truth) = simulate_and_run(&s);
     let truth = fuse1090::eval::Truth::read(truth.as_slice()).unwrap();
-    let records: Vec<Value> =
-        String::from_utf8_lossy(&out).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let records = parse(&out);
     let flags = alerts(&records, "adsb_suspect");
     for hex in ["390094", "390095"] {
         let changes: Vec<bool> =

@@ -30,6 +30,7 @@
 //! the CUSUM's conditions.
 
 use crate::problem::{positive, Problem};
+use nalgebra::{Matrix2, Vector2};
 use serde::{Deserialize, Serialize};
 
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -87,25 +88,35 @@ pub struct Monitor {
     /// The fixes' information (east/north, m^-2) and information-weighted
     /// differences since the excursion that raised (or will raise) the
     /// flag began: the offset flagged is their ratio.
-    info: [[f64; 2]; 2],
-    info_d: [f64; 2],
+    info: Matrix2<f64>,
+    info_d: Vector2<f64>,
     /// While flagged: the log-likelihood ratio of the offset flagged
     /// against none, over the checks since the flag.
     odds_log: f64,
+}
+
+/// One fix's difference from the report (east/north m, the fix less the
+/// report), its covariance and that covariance's inverse.
+#[derive(Clone, Copy)]
+struct FixCheck {
+    d: Vector2<f64>,
+    s: Matrix2<f64>,
+    inv: Matrix2<f64>,
 }
 
 impl Monitor {
     /// One ADS-B/MLAT pair: east/north difference (m, the fix less the
     /// report) and its covariance. Returns the new flag when it changed.
     pub fn push(&mut self, cfg: &ConformanceConfig, d: [f64; 2], s: [[f64; 2]; 2]) -> Option<bool> {
-        let det = s[0][0] * s[1][1] - s[0][1] * s[1][0];
-        if !(det > 0.0 && s[0][0] > 0.0 && d.iter().all(|v| v.is_finite())) {
+        let s = Matrix2::new(s[0][0], s[0][1], s[1][0], s[1][1]);
+        let d = Vector2::from(d);
+        if !(s[(0, 0)] > 0.0 && d.iter().all(|v| v.is_finite())) {
             return None;
         }
-        let inv = [[s[1][1] / det, -s[0][1] / det], [-s[1][0] / det, s[0][0] / det]];
+        let fix = FixCheck { d, s, inv: inverse(&s)? };
         // The aircraft truly at the report moved by `o`: the fix's difference from there.
-        let chi2_at = |o: [f64; 2]| quadratic(inv, [d[0] - o[0], d[1] - o[1]]);
-        self.judge(cfg, Some((d, inv)), chi2_at)
+        let chi2_at = |o: [f64; 2]| quadratic(&fix.inv, &(d - Vector2::from(o)));
+        self.judge(cfg, Some(fix), chi2_at)
     }
 
     /// One transmission too few receivers heard for a fix: `test` gives
@@ -122,13 +133,8 @@ impl Monitor {
 
     /// The offset flagged (east/north m, the fix less the report), once
     /// some fix has told one.
-    fn offset(&self) -> Option<[f64; 2]> {
-        let i = self.info;
-        let det = i[0][0] * i[1][1] - i[0][1] * i[1][0];
-        (det > 0.0).then(|| {
-            let b = self.info_d;
-            [(i[1][1] * b[0] - i[0][1] * b[1]) / det, (i[0][0] * b[1] - i[1][0] * b[0]) / det]
-        })
+    fn offset(&self) -> Option<Vector2<f64>> {
+        inverse(&self.info).map(|p| p * self.info_d)
     }
 
     /// The log-likelihood ratio of one check (`nis` its chi-square value at
@@ -137,29 +143,21 @@ impl Monitor {
     /// `N(offset, S + I^-1)`, so that the ratios of successive fixes add up
     /// to the odds of the offset as the fixes reveal it (an offset flagged
     /// from a few fixes that drew it large is not the one tested against).
-    fn ratio_log(
-        &self,
-        fix: Option<([f64; 2], [[f64; 2]; 2])>,
-        nis: f64,
-        chi2_at: impl Fn([f64; 2]) -> f64,
-    ) -> Option<f64> {
+    fn ratio_log(&self, fix: Option<FixCheck>, nis: f64, chi2_at: impl Fn([f64; 2]) -> f64) -> Option<f64> {
         let o = self.offset()?;
-        let Some((d, inv)) = fix else { return Some(0.5 * (nis - chi2_at(o))) };
-        let (s, p) = (inverse(inv)?, inverse(self.info)?);
-        let wide = [[s[0][0] + p[0][0], s[0][1] + p[0][1]], [s[1][0] + p[1][0], s[1][1] + p[1][1]]];
-        let wide_inv = inverse(wide)?;
-        let chi2_h1 = quadratic(wide_inv, [d[0] - o[0], d[1] - o[1]]);
-        let det = |m: [[f64; 2]; 2]| m[0][0] * m[1][1] - m[0][1] * m[1][0];
-        Some(0.5 * (nis - chi2_h1) - 0.5 * (det(wide) / det(s)).ln())
+        let Some(fix) = fix else { return Some(0.5 * (nis - chi2_at(o.into()))) };
+        let wide = fix.s + inverse(&self.info)?;
+        let chi2_h1 = quadratic(&inverse(&wide)?, &(fix.d - o));
+        Some(0.5 * (nis - chi2_h1) - 0.5 * (wide.determinant() / fix.s.determinant()).ln())
     }
 
-    /// The CUSUM step for one check; `fix` the difference and its
-    /// information when it is a fix's; `chi2_at` its chi-square(2) value
-    /// were the aircraft at the report moved by an offset.
+    /// The CUSUM step for one check; `fix` the fix's difference when it is
+    /// a fix's; `chi2_at` its chi-square(2) value were the aircraft at the
+    /// report moved by an offset.
     fn judge(
         &mut self,
         cfg: &ConformanceConfig,
-        fix: Option<([f64; 2], [[f64; 2]; 2])>,
+        fix: Option<FixCheck>,
         chi2_at: impl Fn([f64; 2]) -> f64,
     ) -> Option<bool> {
         let nis = chi2_at([0.0, 0.0]);
@@ -169,7 +167,7 @@ impl Monitor {
             }
         }
         self.last_nis = nis;
-        self.last_offset_m = fix.map(|(d, _)| d[0].hypot(d[1]));
+        self.last_offset_m = fix.map(|f| f.d.norm());
         // Capped at twice the threshold, so a flag clears in a few
         // conforming fixes however far off the aircraft was.
         // One fix moves the sum by at most 60% of the threshold: a single
@@ -180,15 +178,13 @@ impl Monitor {
         self.conforming = if fits { self.conforming + 1 } else { 0 };
         // Time differences see an offset along some directions only: they
         // tell none to estimate.
-        if let Some((d, inv)) = fix {
-            for ((info, info_d), row) in self.info.iter_mut().zip(&mut self.info_d).zip(inv) {
-                *info = [info[0] + row[0], info[1] + row[1]];
-                *info_d += row[0] * d[0] + row[1] * d[1];
-            }
+        if let Some(fix) = fix {
+            self.info += fix.inv;
+            self.info_d += fix.inv * fix.d;
         }
         if !self.suspect && self.sum == 0.0 {
             // No excursion under way: none to estimate an offset from.
-            (self.info, self.info_d) = Default::default();
+            (self.info, self.info_d) = (Matrix2::zeros(), Vector2::zeros());
         }
         if !self.suspect && self.sum > cfg.threshold {
             self.suspect = true;
@@ -208,15 +204,16 @@ impl Monitor {
     }
 }
 
-/// The inverse of a 2x2 matrix, when it has one.
-fn inverse(m: [[f64; 2]; 2]) -> Option<[[f64; 2]; 2]> {
-    let det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
-    (det > 0.0 && det.is_finite()).then(|| [[m[1][1] / det, -m[0][1] / det], [-m[1][0] / det, m[0][0] / det]])
+/// The inverse of a 2x2 covariance or information matrix, when its
+/// determinant is positive and finite.
+fn inverse(m: &Matrix2<f64>) -> Option<Matrix2<f64>> {
+    let det = m.determinant();
+    (det > 0.0 && det.is_finite()).then(|| m.try_inverse()).flatten()
 }
 
-/// `v' m v` for a symmetric 2x2 `m`.
-fn quadratic(m: [[f64; 2]; 2], v: [f64; 2]) -> f64 {
-    m[0][0] * v[0] * v[0] + (m[0][1] + m[1][0]) * v[0] * v[1] + m[1][1] * v[1] * v[1]
+/// `v' m v`.
+fn quadratic(m: &Matrix2<f64>, v: &Vector2<f64>) -> f64 {
+    v.dot(&(m * v))
 }
 
 /// Time differences of a transmission against the position it reported:

@@ -20,12 +20,13 @@
 //!
 //! Here: the aircraft table and the [`Fuser`] that feeds, fuses and
 //! publishes; beside it an aircraft of the table and how it starts
-//! (`aircraft.rs`), the checks a measurement passes first (`intake.rs`),
-//! one measurement into an aircraft's tracks (`tracks.rs`), a publication made (`publication.rs`), the configuration
-//! (`config.rs`), what is published (`records.rs`), the MLAT hold's queue
-//! (`hold.rs`), the particle filter's aircraft (`sparse.rs`), the fusion methods
-//! ([`methods`]), conflict prediction ([`conflict`]) and the ADS-B
-//! conformance monitor ([`conformance`]).
+//! (`aircraft.rs`), the checks a measurement passes first (`intake.rs`), one
+//! measurement into an aircraft's tracks (`tracks.rs`), a publication made
+//! (`publication.rs`), the configuration (`config.rs`), what is published
+//! (`records.rs`), the MLAT hold's queue (`hold.rs`), the particle filter's
+//! aircraft (`sparse.rs`), the fusion methods ([`methods`]), conflict
+//! prediction ([`conflict`]) and the ADS-B conformance monitor
+//! ([`conformance`]).
 
 mod aircraft;
 mod config;

@@ -25,12 +25,11 @@ impl Fuser {
         }
         // A flagged aircraft's ADS-B stays out of the fused track.
         let into_fused = !(a.adsb_suspect && m.source == Source::Adsb);
-        let echo_counted = without_echo(m);
         let outcome = if into_fused {
             self.stats.reruns += (m.t < a.fused.t()) as u64;
             // Its ADS-B is in the fused track (unless flagged, when no clock
             // is synchronised on it either).
-            a.fused.apply(if a.adsb_suspect { m } else { echo_counted })
+            a.fused.apply(if a.adsb_suspect { m } else { without_echo(m) })
         } else {
             self.stats.suspect_excluded += 1;
             Outcome::Early
@@ -41,7 +40,7 @@ impl Fuser {
             // The MLAT-only track has no ADS-B: the echo is news to it,
             // unless a track-to-track method fuses it with the ADS-B track.
             let t2t = self.cfg.method != Method::Measurement;
-            a.single[m.source as usize].apply(if t2t { echo_counted } else { m })
+            a.single[m.source as usize].apply(if t2t { without_echo(m) } else { m })
         } else if into_fused {
             outcome
         } else {
