@@ -177,7 +177,11 @@ const SYNC_SOURCE_MAX_NIS: f64 = 4.0;
 impl Rx {
     /// Timing sigma (s) to weight this receiver with: its learnt core
     /// (which starts from the configured jitter), never better than a third
-    /// of the configured one.
+    /// of the configured one. The floor is the weights' only: below it, a
+    /// receiver learnt a little low would be weighted more, its residuals
+    /// would shrink faster than its leverage says, and it would be learnt
+    /// lower still. The fixes' covariances take the learnt core
+    /// ([`Mlat::believed_var`], `solver::sandwich`).
     fn sigma(&self) -> f64 {
         self.timing.sigma().max(self.sigma_t / 3.0)
     }
@@ -480,8 +484,14 @@ impl Mlat {
         // solve already did when its last round found no outlier).
         let judged =
             judged.or_else(|| (fix.dof > 0).then(|| self.judge(&g.ms, &g.sites, alt, &fix)).flatten());
+        // Its covariance for the variances its receivers are believed to
+        // have, where the weights were held at their floor.
+        let believed = |k: usize| self.believed_var(&g, k);
         let fix = match &judged {
-            Some(j) => super::solver::hedge(&fix, &j.at, |k| j.p_late(k)),
+            Some(j) => super::solver::hedge(&j.at.sandwich(&fix, believed), &j.at, |k| j.p_late(k)),
+            None if (0..g.ms.len()).any(|k| believed(k).is_some()) => {
+                super::solver::AtFix::new(&g.ms, alt, &fix).map_or(fix, |at| at.sandwich(&fix, believed))
+            }
             None => fix,
         };
         let used: smallvec::SmallVec<[usize; 8]> = g.sites.iter().flatten().copied().collect();

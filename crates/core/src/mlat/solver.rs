@@ -685,5 +685,7 @@ fn refine(
     None
 }
 
+mod sandwich;
+
 #[cfg(test)]
 mod tests;

@@ -152,6 +152,16 @@ impl Mlat {
         }
     }
 
+    /// The variance (s^2) measurement `k` of `g` is believed to have where
+    /// its weight says otherwise: a lone receiver weighted at its floor
+    /// rather than at its learnt core (see `Rx::sigma`).
+    pub(super) fn believed_var(&self, g: &robust::GroupCopies, k: usize) -> Option<f64> {
+        let [rx] = g.sites[k][..] else { return None };
+        let r = &self.rxs[rx];
+        let learnt = r.timing.sigma();
+        (learnt < r.sigma()).then(|| learnt * learnt + r.surveyed_var_s2 + g.sync_vars[k])
+    }
+
     pub(super) fn note_jump(&mut self, rx: usize, jumped: bool) {
         let r = &mut self.rxs[rx];
         r.jumps += JUMP_MEMORY * (jumped as u8 as f64 - r.jumps);
