@@ -3,29 +3,44 @@
 //! covariances where the weights stop at their floor.
 
 use super::*;
+use rand::SeedableRng;
+use rand_distr::{Distribution, Normal};
 
-#[test]
-fn calibration_learns_a_bias_and_the_noise_without_trusting_a_few_fixes() {
-    use rand::SeedableRng;
-    use rand_distr::{Distribution, Normal};
+/// An engine of six GPS-timed receivers: `receivers()` and one to the south.
+fn six_receivers() -> (Mlat, Vec<ReceiverDecl>) {
     let mut m = Mlat::new(MlatConfig::default());
     let mut rxs = receivers();
     rxs.push(ReceiverDecl { id: "r5".into(), lat: 48.4, lon: 2.4, alt: 100.0, clock: ClockKind::Gps });
     for r in &rxs {
         m.add_receiver(r);
     }
+    (m, rxs)
+}
+
+/// The `k`-th transmission of an aircraft at 30,000 ft moving about over
+/// them, sent at `t`, copy `i` late by `err(i)` (s): the group and where
+/// the aircraft was (lat, lon).
+fn over_them(rxs: &[ReceiverDecl], k: usize, t: f64, mut err: impl FnMut(usize) -> f64) -> (Group, f64, f64) {
+    let (lat, lon) = (48.5 + 0.03 * (k % 17) as f64, 2.1 + 0.04 * (k % 13) as f64);
+    let mut g = group(rxs, geodetic_to_ecef(lat, lon, 30_000.0 * FT_TO_M), t);
+    for (i, c) in g.copies.iter_mut().enumerate() {
+        delay(c, 1e-6 + err(i));
+    }
+    (g, lat, lon)
+}
+
+#[test]
+fn calibration_learns_a_bias_and_the_noise_without_trusting_a_few_fixes() {
+    let (mut m, rxs) = six_receivers();
     let configured = m.rxs[0].sigma_t;
     // Real jitter 20 ns (the configuration says 50), receiver 2 late by 150 ns.
     let noise = Normal::new(0.0, 20e-9).unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
     let t0 = 1_700_000_000.0;
     let mut fix = |m: &mut Mlat, k: usize| {
-        let (lat, lon) = (48.5 + 0.03 * (k % 17) as f64, 2.1 + 0.04 * (k % 13) as f64);
         let t = t0 + k as f64;
-        let mut g = group(&rxs, geodetic_to_ecef(lat, lon, 30_000.0 * FT_TO_M), t);
-        for (i, c) in g.copies.iter_mut().enumerate() {
-            delay(c, 1e-6 + noise.sample(&mut rng) + if i == 2 { 150e-9 } else { 0.0 });
-        }
+        let late = |i: usize| if i == 2 { 150e-9 } else { 0.0 };
+        let (g, _, _) = over_them(&rxs, k, t, |i| noise.sample(&mut rng) + late(i));
         m.on_group(&g, t + 0.2).fix().is_some()
     };
     for k in 0..25 {
@@ -57,25 +72,14 @@ fn receivers_better_than_their_floor_give_fixes_their_own_covariance() {
     // floor (17 ns), the fixes once claimed four times their error
     // variance (NEES about 0.5); with the covariance from the learnt core,
     // what they claim is what they make.
-    use rand::SeedableRng;
-    use rand_distr::{Distribution, Normal};
-    let mut m = Mlat::new(MlatConfig::default());
-    let mut rxs = receivers();
-    rxs.push(ReceiverDecl { id: "r5".into(), lat: 48.4, lon: 2.4, alt: 100.0, clock: ClockKind::Gps });
-    for r in &rxs {
-        m.add_receiver(r);
-    }
+    let (mut m, rxs) = six_receivers();
     let noise = Normal::new(0.0, 8e-9).unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
     let t0 = 1_700_000_000.0;
     let (mut nees, mut n) = (0.0, 0.0);
     for k in 0..4000 {
-        let (lat, lon) = (48.5 + 0.03 * (k % 17) as f64, 2.1 + 0.04 * (k % 13) as f64);
         let t = t0 + 0.25 * k as f64;
-        let mut g = group(&rxs, geodetic_to_ecef(lat, lon, 30_000.0 * FT_TO_M), t);
-        for c in g.copies.iter_mut() {
-            delay(c, 1e-6 + noise.sample(&mut rng));
-        }
+        let (g, lat, lon) = over_them(&rxs, k, t, |_| noise.sample(&mut rng));
         let fix = m.on_group(&g, t + 0.2).fix();
         if let Some(f) = fix.filter(|_| k >= 3000) {
             let e = (f.lon - lon).to_radians() * 6_371_000.0 * lat.to_radians().cos();
