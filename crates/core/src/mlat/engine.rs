@@ -190,6 +190,13 @@ impl Rx {
         self.timing.offset()
     }
 
+    /// The variance (s^2) of one of its copies on the network's time, its
+    /// timing taken as `sigma` (s): that, its surveyed position's doubt,
+    /// and the clock synchronisation's `sync_var_s2`.
+    fn copy_var(&self, sigma: f64, sync_var_s2: f64) -> f64 {
+        sigma * sigma + self.surveyed_var_s2 + sync_var_s2
+    }
+
     /// Its learnt offset's error at `now`: the variance (s^2) and how long
     /// (s) that error lasts, from now on, before its lessons replace it (a
     /// receiver no fix has taught for a while keeps its error that much

@@ -126,8 +126,8 @@ impl Mlat {
             let rx = &self.rxs[c.rx];
             // A GPS receiver's offset came off in the common time base.
             let offset = if rx.clock == ClockKind::Gps { 0.0 } else { rx.bias() };
-            let own = rx.sigma().powi(2) + rx.surveyed_var_s2;
-            let m = Measurement { pos: rx.ecef, t: *t - offset, sigma_t: (own + var).sqrt() };
+            let m =
+                Measurement { pos: rx.ecef, t: *t - offset, sigma_t: rx.copy_var(rx.sigma(), *var).sqrt() };
             match ms.iter().position(|o| ecef_distance(o.pos, m.pos) < self.cfg.min_separation_m) {
                 Some(k) => {
                     self.stats.close_receivers += 1;
@@ -159,7 +159,7 @@ impl Mlat {
         let [rx] = g.sites[k][..] else { return None };
         let r = &self.rxs[rx];
         let learnt = r.timing.sigma();
-        (learnt < r.sigma()).then(|| learnt * learnt + r.surveyed_var_s2 + g.sync_vars[k])
+        (learnt < r.sigma()).then(|| r.copy_var(learnt, g.sync_vars[k]))
     }
 
     pub(super) fn note_jump(&mut self, rx: usize, jumped: bool) {

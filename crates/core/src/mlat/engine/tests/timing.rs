@@ -82,8 +82,10 @@ fn receivers_better_than_their_floor_give_fixes_their_own_covariance() {
         let (g, lat, lon) = over_them(&rxs, k, t, |_| noise.sample(&mut rng));
         let fix = m.on_group(&g, t + 0.2).fix();
         if let Some(f) = fix.filter(|_| k >= 3000) {
-            let e = (f.lon - lon).to_radians() * 6_371_000.0 * lat.to_radians().cos();
-            let nn = (f.lat - lat).to_radians() * 6_371_000.0;
+            // East and north (m) by the local radii, as `geo::displace` moves.
+            let (h, (mr, nr)) = (30_000.0 * FT_TO_M, crate::geo::radii(lat.to_radians()));
+            let e = (f.lon - lon).to_radians() * (nr + h) * lat.to_radians().cos();
+            let nn = (f.lat - lat).to_radians() * (mr + h);
             let c = nalgebra::Matrix2::new(f.cov_en[0][0], f.cov_en[0][1], f.cov_en[1][0], f.cov_en[1][1]);
             let d = nalgebra::Vector2::new(e, nn);
             nees += (d.transpose() * c.try_inverse().expect("covariance") * d)[0];
