@@ -498,6 +498,7 @@ fn a_burst_of_frames_in_one_tcp_read_is_processed_whole() {
         // repeated is impossible).
         "fuse1090_measurements_rejected_total{reason=\"non_finite\"} 0",
         "fuse1090_fusion_fallbacks_total 0",
+        "fuse1090_tracks_withheld_spread_total 0",
         // As are multilateration's (one receiver: nothing to fix or drop).
         "fuse1090_mlat_outliers_dropped_total 0",
         "fuse1090_mlat_gps_time_jumps_total 0",

@@ -148,3 +148,38 @@ fn comm_b_velocities_give_the_clouds_their_aircrafts_velocity() {
     let (nees, band) = (with_row.nees.unwrap(), with_row.nees_band.unwrap());
     assert!(nees > band[0] && nees < band[1], "NEES {nees} against {band:?}");
 }
+
+/// An aircraft still heard but without a position for minutes (fixtures/
+/// scenarios/fringe.toml, seed 71: 3B0006 between its last fix and the
+/// time differences of a transmission four minutes later): its track,
+/// predicted across the gap, then pulled along one hyperbola, was published
+/// some 200 km off, moving at 2,000 m/s. Such a track says nothing of where
+/// the aircraft is, and is withheld (`publish_sigma_m`); what is published
+/// stays near its aircraft at an aircraft's speed.
+#[test]
+fn a_track_predicted_for_minutes_is_withheld_not_published_far_off() {
+    let (capture, truth) = common::simulated("fringe", 71);
+    let worst = |cfg: &CoreConfig| {
+        let (_, lines, _) = run_with(&capture, &truth, cfg);
+        let tracks = lines.iter().filter(|v| v["type"] == "track");
+        let off_m = |v: &serde_json::Value| {
+            let (t, lat, lon) =
+                (v["t"].as_f64().unwrap(), v["lat"].as_f64().unwrap(), v["lon"].as_f64().unwrap());
+            let p = truth.position(v["hex"].as_str().unwrap(), t).expect("truth");
+            fuse1090::geo::distance_m(p.0, p.1, lat, lon)
+        };
+        let speed = |v: &serde_json::Value| {
+            v["vel_enu"][0].as_f64().unwrap().hypot(v["vel_enu"][1].as_f64().unwrap())
+        };
+        tracks.fold((0.0f64, 0.0f64), |(d, s), v| (d.max(off_m(v)), s.max(speed(v))))
+    };
+    let mut cfg = CoreConfig::default();
+    let (off_m, speed) = worst(&cfg);
+    println!("published: at worst {:.1} km off, {speed:.0} m/s", off_m / 1e3);
+    assert!(off_m < 10e3 && speed < 600.0, "{off_m} m off, {speed} m/s");
+    // Published whatever its spread, the track is there.
+    cfg.track.publish_sigma_m = f64::INFINITY;
+    let (off_m, speed) = worst(&cfg);
+    println!("without the limit: {:.1} km off, {speed:.0} m/s", off_m / 1e3);
+    assert!(off_m > 50e3 && speed > 1_000.0, "{off_m} m off, {speed} m/s");
+}

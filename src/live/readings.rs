@@ -125,6 +125,7 @@ pub(super) fn readings(
         // Frames waiting for the core: it fills before anything is dropped.
         Reading::new("fuse1090_queue_frames", Gauge, reg.queued.load(Ordering::Relaxed) as u64, None),
         Reading::new("fuse1090_tracks_published_total", Counter, f.published, None),
+        Reading::new("fuse1090_tracks_withheld_spread_total", Counter, f.withheld_spread, None),
         // Outside a track's gate: the outliers of normal operation, not bad input.
         Reading::new("fuse1090_measurements_gated_total", Counter, f.gated, None),
         Reading::new("fuse1090_track_restarts_total", Counter, f.restarts, None),

@@ -82,12 +82,20 @@ impl Fuser {
             sparse: a.sparse_geometry,
             ages_s: [Source::Adsb, Source::Mlat].map(|s| Some(age(s).max(0.0)).filter(|age| *age <= window)),
         };
-        if let Some(est) = fused {
+        // Too spread to say where the aircraft is: withheld (counted once
+        // per publication).
+        let limit = self.tcfg.publish_sigma_m;
+        let spread = |est: &Option<Estimate>| est.is_some_and(|e| e.largest_sigma_m() > limit);
+        if spread(&fused) || (self.publish_source_tracks && (spread(&adsb) || spread(&mlat))) {
+            self.stats.withheld_spread += 1;
+        }
+        let tight = |est: Option<Estimate>| est.filter(|e| e.largest_sigma_m() <= limit);
+        if let Some(est) = tight(fused) {
             out.push(Output::Track(Box::new(report(TrackSource::Fused, est, sources))));
             self.stats.published += 1;
         }
         if self.publish_source_tracks {
-            for (s, est) in [(Source::Adsb, adsb), (Source::Mlat, mlat)] {
+            for (s, est) in [(Source::Adsb, tight(adsb)), (Source::Mlat, tight(mlat))] {
                 if let Some(est) = est {
                     out.push(Output::Track(Box::new(report(s.into(), est, smallvec::smallvec![s]))));
                 }

@@ -95,6 +95,8 @@ pub struct FuseStats {
     pub tracks_created: u64,
     pub tracks_dropped: u64,
     pub published: u64,
+    /// Publications due whose estimate was beyond `publish_sigma_m`: withheld.
+    pub withheld_spread: u64,
     /// Fusion of two tracks impossible (a covariance not positive definite,
     /// or one track's newest position older than the coasting limit): the
     /// better single track published, once per publication.
@@ -156,7 +158,7 @@ impl std::fmt::Display for FuseStats {
         write!(
             f,
             "{} measurements, rejected [{}], gated {}, re-run {}; tracks {} created, {} dropped, \
-             {} restarts; {} published, fusion fallbacks {}; ADS-B suspect flags {} ({} positions kept out); \
+             {} restarts; {} published ({} withheld, too spread), fusion fallbacks {}; ADS-B suspect flags {} ({} positions kept out); \
              TDOA updates {}; conflicts {}",
             self.measurements,
             rejected.join(" "),
@@ -166,6 +168,7 @@ impl std::fmt::Display for FuseStats {
             self.tracks_dropped,
             self.restarts,
             self.published,
+            self.withheld_spread,
             self.fusion_fallbacks,
             self.suspect_flags,
             self.suspect_excluded,

@@ -148,7 +148,7 @@ impl Fuser {
                 // says), and the cloud, which takes who heard it, is the
                 // better judge.
                 let limit = self.tcfg.sparse.publish_sigma_m;
-                let spread = a.fused.estimate_at(m.t).map_or(0.0, |e| largest_sigma_m(&e.state.p));
+                let spread = a.fused.estimate_at(m.t).map_or(0.0, |e| e.largest_sigma_m());
                 if spread > limit {
                     self.give_back(
                         addr,
@@ -221,10 +221,4 @@ impl Fuser {
         a.sparse_since = Some(f64::NEG_INFINITY);
         tracing::info!(hex = format!("{addr:06X}"), "tracks started from a particle cloud given back: {why}");
     }
-}
-
-/// The largest horizontal standard deviation of a track's state (m).
-fn largest_sigma_m(p: &nalgebra::Matrix6<f64>) -> f64 {
-    let (a, b, c) = (p[(0, 0)], p[(0, 1)], p[(1, 1)]);
-    (0.5 * (a + c) + (0.25 * (a - c).powi(2) + b * b).sqrt()).max(0.0).sqrt()
 }

@@ -177,6 +177,13 @@ pub struct TrackConfig {
     /// dropped after `drop_after_s`.
     pub coast_after_s: f64,
     pub drop_after_s: f64,
+    /// A track whose largest horizontal sigma is beyond this (m) is not
+    /// published (counted): it no longer says where the aircraft is. A
+    /// track predicted across minutes without a position, while the
+    /// aircraft was still heard, then pulled along one time difference's
+    /// hyperbola, was published tens of kilometres off at thousands of
+    /// metres a second. The same limit as a particle cloud's by default.
+    pub publish_sigma_m: f64,
     /// Largest number of aircraft tracked; more are refused and counted.
     pub max_tracks: usize,
     /// Static/moving test: window of positions, their spacing (s; closer
@@ -219,6 +226,7 @@ impl Default for TrackConfig {
             confirm_n: 5,
             coast_after_s: 3.0,
             drop_after_s: 20.0,
+            publish_sigma_m: 3_000.0,
             max_tracks: 20_000,
             motion_window: 5,
             motion_interval_s: 1.0,
@@ -296,6 +304,7 @@ impl TrackConfig {
                 ("reorder_window_s", self.reorder_window_s),
                 ("coast_after_s", self.coast_after_s),
                 ("drop_after_s", self.drop_after_s),
+                ("publish_sigma_m", self.publish_sigma_m),
                 ("motion_interval_s", self.motion_interval_s),
                 ("vb_prior", self.vb_prior),
                 ("vb_prior_adsb", self.vb_prior_adsb),

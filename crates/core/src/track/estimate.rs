@@ -47,6 +47,13 @@ impl Estimate {
         self.cov_local
     }
 
+    /// The largest horizontal standard deviation of its position (m): the
+    /// square root of its covariance's larger eigenvalue.
+    pub fn largest_sigma_m(&self) -> f64 {
+        let [[a, b], [_, c]] = self.cov_local;
+        (0.5 * (a + c) + (0.25 * (a - c).powi(2) + b * b).sqrt()).max(0.0).sqrt()
+    }
+
     /// The horizontal state expressed in another plane.
     pub fn in_plane(&self, other: &Plane) -> Gaussian {
         transfer(&self.state, &self.plane, other)
