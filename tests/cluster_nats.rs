@@ -161,21 +161,53 @@ fn start_roles(
     let clock = spawn(&[], &config(dir, name, port, "clock"));
     // One file for them all: written again while one of them read it, it was once read empty.
     let worker_config = config(dir, name, port, "worker");
-    let workers = (0..workers).map(|_| spawn(&[], &worker_config)).collect();
+    let (workers, logs): (Vec<Proc>, Vec<PathBuf>) =
+        (0..workers).map(|_| spawn_logged(&[], &worker_config)).unzip();
     let publisher_config = config(dir, name, port, "publisher");
     let text = std::fs::read_to_string(&publisher_config).unwrap() + publisher_extra;
     std::fs::write(&publisher_config, text).unwrap();
     let publisher = spawn(&["--output", output.to_str().unwrap()], &publisher_config);
-    std::thread::sleep(Duration::from_millis(2500));
+    shared_out(&logs);
     (clock, workers, publisher)
+}
+
+/// Waits until the workers logging to `logs` hold an even share of the 12
+/// partitions each. A fixed wait was once too short for a worker started
+/// late on two busy cores: the others took its share, and handed it back
+/// with the replay under way, its aircraft's tracks started again.
+fn shared_out(logs: &[PathBuf]) {
+    let share = 12 / logs.len() as i64;
+    let held = |log: &PathBuf| {
+        let text = std::fs::read_to_string(log).unwrap_or_default();
+        let count = |what: &str| text.lines().filter(|l| l.contains(what)).count() as i64;
+        count("partition claimed") - count("partition handed back") - count("partition claim lost")
+    };
+    let started = Instant::now();
+    loop {
+        let now: Vec<i64> = logs.iter().map(held).collect();
+        if now.iter().all(|&h| h == share) {
+            return;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "the workers did not share the partitions: {now:?}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
 }
 
 /// A role's process; its log goes next to its configuration (`.log`).
 fn spawn(args: &[&str], config: &Path) -> Proc {
+    spawn_logged(args, config).0
+}
+
+/// A role's process, and the path of its log.
+fn spawn_logged(args: &[&str], config: &Path) -> (Proc, PathBuf) {
     static N: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
     let k = N.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let log = std::fs::File::create(config.with_extension(format!("{k}.log"))).unwrap();
-    Proc(
+    let path = config.with_extension(format!("{k}.log"));
+    let log = std::fs::File::create(&path).unwrap();
+    let proc = Proc(
         Command::new(BIN)
             .arg("run")
             .arg("--config")
@@ -186,7 +218,8 @@ fn spawn(args: &[&str], config: &Path) -> Proc {
             .stderr(log)
             .spawn()
             .unwrap(),
-    )
+    );
+    (proc, path)
 }
 
 /// `key=value` figures of a role's summary line.
@@ -580,6 +613,11 @@ fn a_cluster_of_processes_tracks_as_one_node_does_and_survives_a_killed_worker()
                     + run.publisher["nats_retries"]
                     + run.workers.iter().map(|w| w["nats_retries"]).sum::<u64>();
                 assert!(retries > 0, "the restart went unnoticed");
+                // Every process saw its connection go, whether or not a
+                // request of its own failed: a worker counts it as an outage,
+                // after which it claims no more partitions for a while.
+                let roles = [&run.ingest, &run.clock, &run.publisher].into_iter().chain(&run.workers);
+                assert!(roles.into_iter().all(|r| r["nats_disconnects"] > 0), "{:?}", run.workers);
                 assert_eq!(held(&run.workers), vec![4, 4, 4], "{:?}", run.workers);
             }
             // The two at the start handed partitions back to the third

@@ -52,8 +52,11 @@ pub(super) async fn claim_partitions(
     // After NATS was away, every claim and registration may have aged out
     // on the server: two leases of quiet in which each worker takes back
     // its own before any claims more (the first back would count itself
-    // alone and take every partition, the others' cores thrown away).
-    let (mut retries_seen, mut quiet_until) = (super::outage::retries(), tokio::time::Instant::now());
+    // alone and take every partition, the others' cores thrown away). An
+    // outage shows as a retry, or as a lost connection where none was
+    // needed (the client held the requests until it was back).
+    let outages = || super::outage::retries() + super::outage::disconnects();
+    let (mut outages_seen, mut quiet_until) = (outages(), tokio::time::Instant::now());
     loop {
         tokio::select! {
             _ = tick.tick() => {}
@@ -72,8 +75,8 @@ pub(super) async fn claim_partitions(
         }
         retry("renewing the worker's registration", || nats.workers.put(&id, id.clone().into())).await?;
         let lost = renew_all(&nats, &id, &mut owned, &mut leaving).await;
-        if super::outage::retries() != retries_seen {
-            retries_seen = super::outage::retries();
+        if outages() != outages_seen {
+            outages_seen = outages();
             quiet_until = tokio::time::Instant::now() + Duration::from_secs_f64(2.0 * cfg.lease_s);
         }
         for p in lost {

@@ -164,7 +164,7 @@ pub async fn run(nats: &Nats, cfg: &ClusterConfig, mlat: &crate::mlat::MlatConfi
     let s = merger.stats;
     println!(
         "clock: batches={} notes={} applied={} sync_updates={} replayed_batches={} duplicate_resets={} \
-         unknown_receiver={} bad_batches={} snapshots={} receiver_records={} nats_retries={}",
+         unknown_receiver={} bad_batches={} snapshots={} receiver_records={} nats_retries={} nats_disconnects={}",
         s.batches,
         s.notes,
         s.applied,
@@ -175,7 +175,8 @@ pub async fn run(nats: &Nats, cfg: &ClusterConfig, mlat: &crate::mlat::MlatConfi
         s.bad_batches,
         s.snapshots,
         s.receiver_records,
-        super::outage::retries()
+        super::outage::retries(),
+        super::outage::disconnects()
     );
     Ok(s)
 }

@@ -156,11 +156,12 @@ pub async fn replay(nats: &Nats, cfg: &ClusterConfig, capture: &Path) -> Result<
         "ingest: capture replayed"
     );
     println!(
-        "ingest: frames={} batches={} no_address={} nats_retries={}",
+        "ingest: frames={} batches={} no_address={} nats_retries={} nats_disconnects={}",
         stats.frames,
         stats.batches,
         stats.no_address,
-        super::outage::retries()
+        super::outage::retries(),
+        super::outage::disconnects()
     );
     Ok(stats)
 }

@@ -313,6 +313,12 @@ impl Nats {
         let client = async_nats::ConnectOptions::new()
             .connection_timeout(Duration::from_secs(5))
             .name(format!("fuse1090 {:?}", cfg.roles))
+            .event_callback(|event| async move {
+                if matches!(event, async_nats::Event::Disconnected) {
+                    outage::count_disconnect();
+                    tracing::warn!("NATS connection lost: reconnecting");
+                }
+            })
             .connect(cfg.url.as_str())
             .await
             .with_context(|| format!("cannot connect to NATS at {}", cfg.url))?;

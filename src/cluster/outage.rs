@@ -41,6 +41,7 @@ const FIRST_WAIT: Duration = Duration::from_millis(100);
 const LONGEST_WAIT: Duration = Duration::from_secs(2);
 
 static RETRIES: AtomicU64 = AtomicU64::new(0);
+static DISCONNECTS: AtomicU64 = AtomicU64::new(0);
 
 /// One operation that will be tried again (by its caller).
 pub fn count_retry() {
@@ -50,6 +51,19 @@ pub fn count_retry() {
 /// Operations this process tried again since it started.
 pub fn retries() -> u64 {
     RETRIES.load(Ordering::Relaxed)
+}
+
+/// The client lost its connection (it reconnects by itself). Counted apart
+/// from the retries: an outage shorter than a request's timeout costs no
+/// retry (the client holds the request and sends it once connected), yet
+/// the server may have aged out claims and registrations meanwhile.
+pub fn count_disconnect() {
+    DISCONNECTS.fetch_add(1, Ordering::Relaxed);
+}
+
+/// Times this process's client lost its connection since it started.
+pub fn disconnects() -> u64 {
+    DISCONNECTS.load(Ordering::Relaxed)
 }
 
 /// `op` until it succeeds, or fails for [`OUTAGE`] after its first failure.

@@ -254,7 +254,7 @@ pub async fn run(
     let stats = p.stats;
     println!(
         "publisher: batches={} frames={} events={} conflicts={} replayed_batches={} bad_batches={} \
-         unknown_receivers={} nats_retries={}",
+         unknown_receivers={} nats_retries={} nats_disconnects={}",
         stats.batches,
         stats.frames,
         stats.events,
@@ -262,7 +262,8 @@ pub async fn run(
         stats.replayed_batches,
         stats.bad_batches,
         stats.unknown_receivers,
-        super::outage::retries()
+        super::outage::retries(),
+        super::outage::disconnects()
     );
     Ok(stats)
 }

@@ -108,7 +108,7 @@ impl std::fmt::Display for WorkerStats {
         write!(
             f,
             "worker: batches={} frames={} bad_batches={} sync_updates={} sync_notes={} partitions_taken={} \
-             partitions_handed_back={} partitions_lost={} partitions_held={} receiver_records_dropped={} redelivered={} nats_retries={}",
+             partitions_handed_back={} partitions_lost={} partitions_held={} receiver_records_dropped={} redelivered={} nats_retries={} nats_disconnects={}",
             self.batches,
             self.frames,
             self.bad_batches,
@@ -120,7 +120,8 @@ impl std::fmt::Display for WorkerStats {
             self.partitions_held,
             self.receiver_records,
             self.redelivered,
-            super::outage::retries()
+            super::outage::retries(),
+            super::outage::disconnects()
         )
     }
 }
