@@ -37,6 +37,9 @@ mod placement;
 mod receivers;
 pub use receivers::{gps_mean_offset, timing_report};
 mod robust;
+mod rx;
+use robust::Dropped;
+use rx::Rx;
 mod shared_mode;
 mod stats;
 mod sync_source;
@@ -64,75 +67,6 @@ struct Measured {
 /// The receivers of one measurement (more than one when they stand too close
 /// to be separate sites).
 type Site = smallvec::SmallVec<[usize; 2]>;
-
-/// Whether `after` lies within `before`'s uncertainty (99.9%, 3-D).
-fn near(before: &super::solver::Fix, after: &super::solver::Fix) -> bool {
-    let c = nalgebra::Matrix3::from_fn(|r, k| before.cov_ecef[r][k]);
-    let d = nalgebra::Vector3::from_fn(|r, _| after.ecef[r] - before.ecef[r]);
-    c.try_inverse().is_some_and(|inv| (d.transpose() * inv * d)[0] <= 16.27)
-}
-
-/// Copies left out of a fix as outliers: measurement, site, sync variance (s^2).
-type Dropped = GroupVec<(Measurement, Site, f64)>;
-
-/// A fix's copies judged under their receivers' timing models: the
-/// problem linearised at the fix, and each copy's verdict (none for a
-/// merged site, whose time is no single receiver's).
-struct Judged {
-    at: AtFix,
-    verdicts: GroupVec<Option<Verdict>>,
-}
-
-impl Judged {
-    /// From every copy's verdict under its (first) receiver's model.
-    fn new(at: AtFix, all: &[Verdict], sites: &[Site]) -> Judged {
-        let verdicts = all.iter().zip(sites).map(|(v, site)| (site.len() == 1).then_some(*v)).collect();
-        Judged { at, verdicts }
-    }
-
-    fn p_late(&self, k: usize) -> f64 {
-        self.verdicts[k].map_or(0.0, |v| v.p_late)
-    }
-}
-
-struct Rx {
-    /// Its configured id, for the log.
-    id: String,
-    ecef: [f64; 3],
-    clock: ClockKind,
-    /// Configured jitter (s): the prior for the learnt noise.
-    sigma_t: f64,
-    beast_epoch: Option<u64>,
-    /// Last (local time, arrival time) seen, to notice clock jumps.
-    last_seen: Option<(f64, f64)>,
-    timing: TimingModel,
-    /// Its timing given by the configuration: not learnt.
-    timing_known: bool,
-    /// Found misplaced by its survey (without `self_survey`): out of fixes.
-    misplaced: bool,
-    /// Where the traffic says its antenna is, and its east-north-up frame.
-    survey: Survey,
-    enu: [[f64; 3]; 3],
-    /// Its declared position (geodetic and ECEF; `ecef` is the one in use),
-    /// and the surveyed offset in use instead (east, north m), if any.
-    declared: (f64, f64, f64),
-    declared_ecef: [f64; 3],
-    surveyed: Option<[f64; 2]>,
-    /// The surveyed position's uncertainty as a timing variance (s^2): its
-    /// horizontal variance per axis, and the distance to the survey's
-    /// latest estimate, which it follows only once that moves beyond it.
-    surveyed_var_s2: f64,
-    /// The GPS-timed receiver its clock is best synchronised with, and when
-    /// that was last chosen (arrival time).
-    gps_partner: Option<(usize, f64)>,
-    /// Recent share of its copies whose time jumped (a counter that
-    /// restarted, a GPS time off by whole seconds from the others').
-    jumps: f64,
-    /// When its offset last learnt from a fix (server time), and the mean
-    /// time between its lessons: how long an error of its offset lasts.
-    offset_learnt_t: Option<f64>,
-    lesson_interval_s: f64,
-}
 
 /// GPS-timed copies of one transmission further apart than this (s) cannot
 /// be: light crosses any network in a few milliseconds.
@@ -174,52 +108,6 @@ fn reach_m(dt: f64) -> f64 {
 /// more than multipath does to receivers late on up to a sixth of their
 /// receptions; a position offset of a few hundred metres spoils about half.
 const SYNC_SOURCE_MAX_NIS: f64 = 4.0;
-impl Rx {
-    /// Timing sigma (s) to weight this receiver with: its learnt core
-    /// (which starts from the configured jitter), never better than a third
-    /// of the configured one. The floor is the weights' only: below it, a
-    /// receiver learnt a little low would be weighted more, its residuals
-    /// would shrink faster than its leverage says, and it would be learnt
-    /// lower still. The fixes' covariances take the learnt core
-    /// ([`Mlat::believed_var`], `solver::sandwich`).
-    fn sigma(&self) -> f64 {
-        self.timing.sigma().max(self.sigma_t / 3.0)
-    }
-
-    fn bias(&self) -> f64 {
-        self.timing.offset()
-    }
-
-    /// The variance (s^2) of one of its copies on the network's time, its
-    /// timing taken as `sigma` (s): that, its surveyed position's doubt,
-    /// and the clock synchronisation's `sync_var_s2`.
-    fn copy_var(&self, sigma: f64, sync_var_s2: f64) -> f64 {
-        sigma * sigma + self.surveyed_var_s2 + sync_var_s2
-    }
-
-    /// Its learnt offset's error at `now`: the variance (s^2) and how long
-    /// (s) that error lasts, from now on, before its lessons replace it (a
-    /// receiver no fix has taught for a while keeps its error that much
-    /// longer). None when its timing is given.
-    fn offset_error(&self, now: f64) -> Option<(f64, f64)> {
-        if self.timing_known {
-            return None;
-        }
-        let idle = self.offset_learnt_t.map_or(f64::INFINITY, |t| (now - t).max(0.0));
-        let lasts = self.lesson_interval_s * TimingModel::OFFSET_MEMORY + idle;
-        Some((self.timing.offset_var(), lasts))
-    }
-
-    /// A lesson taught at `now`.
-    fn lesson_at(&mut self, now: f64) {
-        /// Weight of each interval in the mean interval between lessons.
-        const WEIGHT: f64 = 0.05;
-        if let Some(t) = self.offset_learnt_t {
-            self.lesson_interval_s += WEIGHT * ((now - t).max(0.0) - self.lesson_interval_s);
-        }
-        self.offset_learnt_t = Some(now);
-    }
-}
 
 #[derive(Clone, Copy, Default)]
 struct AcState {

@@ -6,6 +6,36 @@
 
 use super::*;
 
+/// Whether `after` lies within `before`'s uncertainty (99.9%, 3-D).
+pub(super) fn near(before: &crate::mlat::solver::Fix, after: &crate::mlat::solver::Fix) -> bool {
+    let c = nalgebra::Matrix3::from_fn(|r, k| before.cov_ecef[r][k]);
+    let d = nalgebra::Vector3::from_fn(|r, _| after.ecef[r] - before.ecef[r]);
+    c.try_inverse().is_some_and(|inv| (d.transpose() * inv * d)[0] <= 16.27)
+}
+
+/// Copies left out of a fix as outliers: measurement, site, sync variance (s^2).
+pub(super) type Dropped = GroupVec<(Measurement, Site, f64)>;
+
+/// A fix's copies judged under their receivers' timing models: the
+/// problem linearised at the fix, and each copy's verdict (none for a
+/// merged site, whose time is no single receiver's).
+pub(super) struct Judged {
+    pub(super) at: AtFix,
+    pub(super) verdicts: GroupVec<Option<Verdict>>,
+}
+
+impl Judged {
+    /// From every copy's verdict under its (first) receiver's model.
+    pub(super) fn new(at: AtFix, all: &[Verdict], sites: &[Site]) -> Judged {
+        let verdicts = all.iter().zip(sites).map(|(v, site)| (site.len() == 1).then_some(*v)).collect();
+        Judged { at, verdicts }
+    }
+
+    pub(super) fn p_late(&self, k: usize) -> f64 {
+        self.verdicts[k].map_or(0.0, |v| v.p_late)
+    }
+}
+
 impl Mlat {
     /// Solves, leaving out each copy that is an outlier under its
     /// receiver's timing model (late by its multipath odds, or off by more
