@@ -7,7 +7,7 @@ mod common;
 
 use std::collections::HashMap;
 
-use common::{en, mahalanobis2, run_core, run_core_knowing};
+use common::{en, fix_median_error, mahalanobis2, run_core};
 use fuse1090::core::{Core, CoreConfig, Event};
 use fuse1090::eval::Truth;
 use fuse1090::feed::capture::{CaptureReader, CaptureRecord, ClockKind};
@@ -15,26 +15,15 @@ use fuse1090::geo::geodetic_to_ecef;
 use fuse1090::mlat::solver::crb_en;
 use fuse1090::mlat::RxState;
 use fuse1090::sim::scenario::Scenario;
-use fuse1090::sim::simulate;
-
-fn root() -> std::path::PathBuf {
-    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn sim(s: &Scenario) -> (Vec<u8>, Vec<u8>) {
-    let (mut c, mut t) = (Vec::new(), Vec::new());
-    simulate(s, &mut c, &mut t).unwrap();
-    (c, t)
-}
 
 #[test]
 fn beast12_clocks_synchronise_and_fixes_reach_the_cramer_rao_bound() {
     // The fusion-8seg flight on beast12 counters, with the 83 ns jitter.
-    let mut scenario = Scenario::load(&root().join("fixtures/scenarios/fusion-8seg-selfsync.toml")).unwrap();
+    let mut scenario = common::scenario("fusion-8seg-selfsync");
     for r in &mut scenario.receiver {
         r.jitter_ns = 83.0;
     }
-    let (capture, truth_bytes) = sim(&scenario);
+    let (capture, truth_bytes) = common::simulate(&scenario);
     let truth = Truth::read(&truth_bytes[..]).unwrap();
 
     // Drive the core by hand to look at the pairs 30 s in.
@@ -134,7 +123,7 @@ fn row_error(truth: &Truth, f: &fuse1090::mlat::MlatFix) -> [f64; 2] {
 /// tma-busy's receivers (rx05 declared 300 m off), none restarting, with
 /// fewer aircraft for a shorter time.
 fn tma_busy_cut(duration_s: f64, aircraft: usize, mode_s_only: usize, spoofers: usize) -> Scenario {
-    let mut s = Scenario::load(&root().join("fixtures/scenarios/tma-busy.toml")).unwrap();
+    let mut s = common::scenario("tma-busy");
     s.duration_s = duration_s;
     let t = &mut s.traffic[0];
     (t.count, t.mode_s_only, t.spoofers) = (aircraft, mode_s_only, spoofers);
@@ -158,7 +147,7 @@ fn a_misplaced_counter_is_surveyed_and_left_out_and_a_restart_does_not_break_mla
     // last two); rx08 restarts at 60 s.
     let mut s = without_delay_bursts(tma_busy_cut(150.0, 40, 10, 2));
     s.receiver[7].resets_s = vec![60.0];
-    let (capture, truth_bytes) = sim(&s);
+    let (capture, truth_bytes) = common::simulate(&s);
     let truth = Truth::read(&truth_bytes[..]).unwrap();
     let (core, events, rxs) = run_core(&capture, &CoreConfig::default());
     let mlat = core.mlat();
@@ -252,7 +241,7 @@ fn late_copies_of_a_delayed_link_are_not_decoded_again() {
         assert_eq!(r.clock, clock);
         (r.burst_per_min, r.burst_s, r.burst_ms) = (6.0, 2.0, 800.0);
     }
-    let (capture, _) = sim(&s);
+    let (capture, _) = common::simulate(&s);
     // Every airborne position transmission heard, by its bytes (a moving
     // aircraft's CPR bytes never repeat within the run).
     let mut heard = std::collections::HashSet::new();
@@ -291,7 +280,7 @@ fn late_copies_of_a_delayed_link_are_not_decoded_again() {
 fn a_receiver_whose_timestamps_step_is_resynchronised_and_stays_in_use() {
     use fuse1090::feed::capture::CaptureWriter;
     let s = without_delay_bursts(tma_busy_cut(300.0, 40, 10, 0));
-    let (capture, _) = sim(&s);
+    let (capture, _) = common::simulate(&s);
     // rx02 (a beast12 counter) steps by 2 s at 60 s.
     let step_at = s.start_unix + 60.0;
     let mut reader = CaptureReader::new(&capture[..], "capture");
@@ -342,208 +331,6 @@ fn a_receiver_whose_timestamps_step_is_resynchronised_and_stays_in_use() {
     assert!(last.sigma_ns.is_some_and(|s| s > 0.0) && last.offset_ns.is_none(), "{last:?}");
 }
 
-/// network-rough: the GPS-timed receiver declared 150 m from its antenna is
-/// found from the ADS-B traffic (where it is, with an honest sigma), and no
-/// other, GPS-timed or counter, is said to be misplaced. The receiver
-/// records carry it.
-#[test]
-fn a_misplaced_gps_receiver_is_surveyed_from_the_traffic() {
-    let s = Scenario::load(&root().join("fixtures/scenarios/network-rough.toml")).unwrap();
-    let (capture, truth_bytes) = sim(&s);
-    let truth = Truth::read(&truth_bytes[..]).unwrap();
-    let (core, events, rxs) = run_core(&capture, &CoreConfig::default());
-    let last: HashMap<usize, &fuse1090::mlat::ReceiverReport> = events
-        .iter()
-        .filter_map(|e| if let Event::Receiver(r) = e { Some((r.rx, &**r)) } else { None })
-        .collect();
-    for (k, t) in truth.receivers.iter().enumerate() {
-        assert_eq!(rxs[k].id, t.id);
-        let r = last[&k];
-        match (r.position_offset_en_m, r.position_offset_sigma_m) {
-            (Some([e, n]), Some(sigma)) => {
-                let [te, tn] = t.position_offset_en_m;
-                let miss = (e - te).hypot(n - tn);
-                eprintln!("{}: found {e:+.1},{n:+.1} m +-{sigma:.1}, true {te:+.0},{tn:+.0}", t.id);
-                assert!(miss < 30.0, "{}: {miss:.1} m from its true offset", t.id);
-                // Honest: within four of its sigmas (per axis, so x sqrt 2).
-                assert!(
-                    miss < 4.0 * sigma * std::f64::consts::SQRT_2 + 5.0,
-                    "{}: {miss:.1} m, sigma {sigma:.1}",
-                    t.id
-                );
-            }
-            _ => panic!("{}: not surveyed: {r:?}", t.id),
-        }
-    }
-    let report = core.mlat().report(s.start_unix + s.duration_s, &|k| rxs[k].id.clone());
-    let misplaced = report.split("misplaced [").nth(1).unwrap().split(']').next().unwrap();
-    assert!(misplaced.starts_with("n06 declared") && !misplaced.contains(';'), "{report}");
-    let (nees, inside, wild) = fix_nees(&events, &truth);
-    eprintln!(
-        "fix NEES {nees:.2}, {:.1}% inside their 95% ellipse, {:.3}% beyond NEES 50; {} fixes solved again",
-        100.0 * inside,
-        100.0 * wild,
-        core.mlat().stats.refixed
-    );
-    assert!((1.8..2.2).contains(&nees) && inside >= 0.93, "NEES {nees}, inside {inside}");
-    // Fixes wrong by many of their sigmas (a Gaussian puts 1e-11 of them
-    // beyond 50): a late copy of a precise receiver that misled the search
-    // for outliers into leaving out good copies made twice as many.
-    assert!(wild <= 0.0005, "{:.3}% of fixes beyond NEES 50", 100.0 * wild);
-    assert!(core.mlat().stats.refixed > 0);
-    // Every receiver but the misplaced one in use, and each one's timing
-    // learnt from the data, the Gaussian core apart from the late copies,
-    // within a quarter of the truth (a counter-timed receiver's truth is
-    // its jitter and its 12 MHz counter's resolution).
-    for (k, t) in truth.receivers.iter().enumerate() {
-        let r = last[&k];
-        if t.id == "n06" {
-            assert_eq!(r.reason, Some(fuse1090::mlat::Exclusion::Misplaced), "{r:?}");
-            // What it learnt, it learnt against its wrong position: not reported.
-            assert_eq!((r.sigma_ns, r.offset_ns, r.outlier_rate), (None, None, None), "{r:?}");
-            continue;
-        }
-        assert_eq!(r.state, RxState::Ok, "{}: {r:?}", t.id);
-        let learnt = r.sigma_ns.expect("a sigma learnt");
-        let truth_ns = t.timing_sigma_ns();
-        eprintln!(
-            "{}: sigma {learnt:.0} ns, true {truth_ns:.0} ns; late {:?}, true {}",
-            t.id, r.outlier_rate, t.multipath_prob
-        );
-        assert!(
-            (learnt / truth_ns - 1.0).abs() <= 0.25,
-            "{}: sigma {learnt:.0} ns, true {truth_ns:.0} ns",
-            t.id
-        );
-        // The late share: found where multipath is common enough to be told
-        // from the core's tail (at least half of it), and no more than a few
-        // per cent made up: another receiver's late copy that could not be
-        // left out moves every residual of its fix, and the tightest
-        // receivers see that as lateness of their own.
-        let late = r.outlier_rate.expect("a late share learnt");
-        if t.multipath_prob >= 0.05 && t.multipath_delay_ns >= 3.0 * truth_ns {
-            assert!(late >= 0.5 * t.multipath_prob, "{}: late {late}, true {}", t.id, t.multipath_prob);
-        }
-        assert!(late <= t.multipath_prob + 0.06, "{}: late {late}, true {}", t.id, t.multipath_prob);
-    }
-}
-
-/// Mean horizontal NEES of the MLAT fixes against the truth, the share
-/// inside their 95% ellipse and the share beyond NEES 50. The eval's 95% band around 2 is for
-/// independent fixes, a hundredth wide at this count; fixes in a row share
-/// their clock synchronisation and geometry, so a tenth is asked.
-fn fix_nees(events: &[Event], truth: &Truth) -> (f64, f64, f64) {
-    let (mut sum, mut inside, mut wild, mut n) = (0.0, 0, 0, 0);
-    for e in events {
-        let Event::Mlat(f) = e else { continue };
-        let Some((lat, lon, _)) = truth.position(&format!("{:06X}", f.addr), f.t) else { continue };
-        let d2 = mahalanobis2(en(lat, lon, f.lat, f.lon), f.cov_en);
-        sum += d2;
-        inside += (d2 <= 5.991) as usize;
-        wild += (d2 > 50.0) as usize;
-        n += 1;
-    }
-    (sum / n as f64, inside as f64 / n as f64, wild as f64 / n as f64)
-}
-
-/// Median horizontal error (m) of the MLAT fixes against the truth.
-fn fix_median_error(events: &[Event], truth: &Truth) -> f64 {
-    let mut errs: Vec<f64> = (events.iter())
-        .filter_map(|e| if let Event::Mlat(f) = e { Some(f) } else { None })
-        .filter_map(|f| {
-            let (lat, lon, _) = truth.position(&format!("{:06X}", f.addr), f.t)?;
-            let e = en(lat, lon, f.lat, f.lon);
-            Some(e[0].hypot(e[1]))
-        })
-        .collect();
-    errs.sort_by(f64::total_cmp);
-    errs[errs.len() / 2]
-}
-
-/// With `self_survey`, the misplaced receiver is used where the traffic
-/// says it is: the fixes' median error falls (the median: one aircraft's
-/// fixes can still follow a wrong solution, which is the solver's, not the
-/// survey's, to fix), to within a fifth of an oracle's, a run told every
-/// receiver's true position and timing through the configuration; and the
-/// fixes stay honest.
-#[test]
-fn self_survey_puts_the_misplaced_receiver_where_it_is_and_learning_nears_the_oracle() {
-    let s = Scenario::load(&root().join("fixtures/scenarios/network-rough.toml")).unwrap();
-    let (capture, truth_bytes) = sim(&s);
-    let truth = Truth::read(&truth_bytes[..]).unwrap();
-    let run = |self_survey: bool, known| {
-        let mut cfg = CoreConfig::default();
-        cfg.mlat.self_survey = self_survey;
-        let (core, events, _) = run_core_knowing(&capture, &cfg, known);
-        // Every ADS-B aircraft here is honest: multipath on the receivers
-        // that hear some of them must not make them look like spoofers (it
-        // did, to a quarter of them, while one late pair counted a hundred).
-        assert_eq!(core.mlat().stats.sync_banned_aircraft, 0, "honest aircraft refused as sync sources");
-        (fix_median_error(&events, &truth), fix_nees(&events, &truth).0)
-    };
-    let oracle = fuse1090::config::Config::parse(&fuse1090::sim::oracle_config(&s), "oracle").unwrap();
-    assert_eq!(oracle.receiver.len(), truth.receivers.len());
-    assert!(oracle.receiver.iter().all(|r| r.timing.is_some()));
-    let ((declared, _), (surveyed, nees)) = (run(false, Vec::new()), run(true, Vec::new()));
-    let (known, _) = run(false, oracle.known_receivers());
-    eprintln!(
-        "fixes' median error: {declared:.1} m declared, {surveyed:.1} m surveyed (NEES {nees:.2}), {known:.1} m oracle"
-    );
-    assert!(surveyed < 0.9 * declared, "{declared:.1} m declared, {surveyed:.1} m surveyed");
-    assert!(surveyed <= 1.2 * known, "{surveyed:.1} m surveyed, {known:.1} m oracle");
-    // Honest with the surveyed position in use: its uncertainty is in the
-    // copies' variance (without it, the position in use metres off pulled
-    // every fix with the receiver the same way, unaccounted for).
-    assert!((1.85..2.1).contains(&nees), "surveyed fixes' NEES {nees:.2}");
-    // The oracle's own use of what it is told: not worse than learning.
-    assert!(known < surveyed, "{surveyed:.1} m surveyed, {known:.1} m oracle");
-}
-
-/// An operator who calibrated every receiver but one (network-rough's
-/// oracle configuration without n01's timing): the given offsets are
-/// absolute, so n01's is learnt against them, its 250 ns GPS bias found,
-/// and its fixes as good as the oracle's. (Learnt as if only differences
-/// mattered, its offset stayed where it started, and the fixes it was in
-/// carried its whole bias.)
-#[test]
-fn a_receiver_whose_timing_is_not_given_learns_it_against_those_given() {
-    let s = Scenario::load(&root().join("fixtures/scenarios/network-rough.toml")).unwrap();
-    let (capture, truth_bytes) = sim(&s);
-    let truth = Truth::read(&truth_bytes[..]).unwrap();
-    let oracle = fuse1090::config::Config::parse(&fuse1090::sim::oracle_config(&s), "oracle").unwrap();
-    let known = |all: bool| -> Vec<_> {
-        (oracle.receiver.iter())
-            .map(|r| r.known())
-            .map(|mut k| {
-                if !all && k.decl.id == "n01" {
-                    k.timing = None;
-                }
-                k
-            })
-            .collect()
-    };
-    let (core, events, rxs) = run_core_knowing(&capture, &CoreConfig::default(), known(false));
-    assert_eq!(rxs[0].id, "n01");
-    let (t, m) = (&truth.receivers[0], core.mlat().timing(0));
-    let (offset_ns, sigma_ns) = (m.offset() * 1e9, m.sigma() * 1e9);
-    let (one_learnt, all_given) = (
-        fix_median_error(&events, &truth),
-        fix_median_error(&run_core_knowing(&capture, &CoreConfig::default(), known(true)).1, &truth),
-    );
-    eprintln!(
-        "n01 learnt {offset_ns:+.0} ns / {sigma_ns:.0} ns (true {:+.0} / {:.0}); fixes' median {one_learnt:.1} m, {all_given:.1} m all given",
-        t.offset_ns,
-        t.timing_sigma_ns()
-    );
-    assert!(
-        (offset_ns - t.offset_ns).abs() < 15.0,
-        "n01 offset {offset_ns:+.0} ns, true {:+.0}",
-        t.offset_ns
-    );
-    assert!((sigma_ns / t.timing_sigma_ns() - 1.0).abs() < 0.25, "n01 sigma {sigma_ns:.0} ns");
-    assert!(one_learnt < 1.1 * all_given, "{one_learnt:.1} m against {all_given:.1} m");
-}
-
 /// A counter-timed receiver declared 300 m off (tma-busy's rx05), with
 /// `self_survey`: used where the traffic says it is, its learnt sigma that
 /// of an honest counter, and the fixes' median error below that of the
@@ -551,7 +338,7 @@ fn a_receiver_whose_timing_is_not_given_learns_it_against_those_given() {
 #[test]
 fn self_survey_moves_a_misplaced_counter_where_it_is() {
     let s = without_delay_bursts(tma_busy_cut(300.0, 40, 10, 0));
-    let (capture, truth_bytes) = sim(&s);
+    let (capture, truth_bytes) = common::simulate(&s);
     let truth = Truth::read(&truth_bytes[..]).unwrap();
     let run = |self_survey: bool| {
         let mut cfg = CoreConfig::default();
@@ -623,8 +410,8 @@ fn hostile(capture: &[u8], start_unix: f64) -> (Vec<u8>, Vec<u8>) {
 /// clock pairs thrown off, the median within 5%).
 #[test]
 fn hostile_receivers_are_found_and_do_not_degrade_the_others() {
-    let s = Scenario::load(&root().join("fixtures/scenarios/network-rough.toml")).unwrap();
-    let (capture, truth_bytes) = sim(&s);
+    let s = common::scenario("network-rough");
+    let (capture, truth_bytes) = common::simulate(&s);
     let truth = Truth::read(&truth_bytes[..]).unwrap();
     let (bad, reference) = hostile(&capture, s.start_unix);
     let (core, events, rxs) = run_core(&bad, &CoreConfig::default());
@@ -661,7 +448,7 @@ fn the_barometric_difference_is_learnt_from_the_fixes_where_no_aircraft_reports_
             r.drift_walk_ppm = 0.0;
             r.position_error_m = [0.0; 3];
         }
-        let (capture, truth_bytes) = sim(&s);
+        let (capture, truth_bytes) = common::simulate(&s);
         let truth = Truth::read(&truth_bytes[..]).unwrap();
         let (_, events, _) = run_core(&capture, &CoreConfig::default());
         // Over the second half, once learnt.
