@@ -82,20 +82,28 @@ impl Fuser {
             sparse: a.sparse_geometry,
             ages_s: [Source::Adsb, Source::Mlat].map(|s| Some(age(s).max(0.0)).filter(|age| *age <= window)),
         };
-        // Too spread to say where the aircraft is: withheld (counted once
-        // per publication).
+        // Coasted (no position lately) until too spread to say where the
+        // aircraft is: withheld, counted once per publication. A track fed
+        // positions is published however poor they are (an honest NACp 1).
         let limit = self.tcfg.publish_sigma_m;
-        let spread = |est: &Option<Estimate>| est.is_some_and(|e| e.largest_sigma_m() > limit);
-        if spread(&fused) || (self.publish_source_tracks && (spread(&adsb) || spread(&mlat))) {
+        let lost = |track: &Track, est: &Option<Estimate>| {
+            est.is_some_and(|e| t - track.last_position_t > coast && e.largest_sigma_m() > limit)
+        };
+        let (fused_lost, adsb_lost, mlat_lost) = (
+            lost(&a.fused, &fused),
+            lost(&a.single[Source::Adsb as usize], &adsb),
+            lost(&a.single[Source::Mlat as usize], &mlat),
+        );
+        if fused_lost || (self.publish_source_tracks && (adsb_lost || mlat_lost)) {
             self.stats.withheld_spread += 1;
         }
-        let tight = |est: Option<Estimate>| est.filter(|e| e.largest_sigma_m() <= limit);
-        if let Some(est) = tight(fused) {
+        if let Some(est) = fused.filter(|_| !fused_lost) {
             out.push(Output::Track(Box::new(report(TrackSource::Fused, est, sources))));
             self.stats.published += 1;
         }
         if self.publish_source_tracks {
-            for (s, est) in [(Source::Adsb, tight(adsb)), (Source::Mlat, tight(mlat))] {
+            let (adsb, mlat) = (adsb.filter(|_| !adsb_lost), mlat.filter(|_| !mlat_lost));
+            for (s, est) in [(Source::Adsb, adsb), (Source::Mlat, mlat)] {
                 if let Some(est) = est {
                     out.push(Output::Track(Box::new(report(s.into(), est, smallvec::smallvec![s]))));
                 }

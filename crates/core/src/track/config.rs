@@ -177,8 +177,10 @@ pub struct TrackConfig {
     /// dropped after `drop_after_s`.
     pub coast_after_s: f64,
     pub drop_after_s: f64,
-    /// A track whose largest horizontal sigma is beyond this (m) is not
-    /// published (counted): it no longer says where the aircraft is. A
+    /// A coasting track (no position for `coast_after_s`) whose largest
+    /// horizontal sigma is beyond this (m) is not published (counted): it
+    /// no longer says where the aircraft is (one fed positions, however
+    /// poor, is published). A
     /// track predicted across minutes without a position, while the
     /// aircraft was still heard, then pulled along one time difference's
     /// hyperbola, was published tens of kilometres off at thousands of
