@@ -2,22 +2,17 @@
 //! the conformance monitor on spoofers (2 km and 300 m offsets in a small
 //! world, and the two spoofers of tma-busy among 148 honest aircraft).
 
-use std::path::PathBuf;
+mod common;
 
+use common::scenario;
 use fuse1090::config::Config;
 use fuse1090::eval::montecarlo::run_in_memory;
 use fuse1090::sim::scenario::Scenario;
 use serde_json::Value;
 
-fn scenario(name: &str) -> Scenario {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("fixtures/scenarios").join(format!("{name}.toml"));
-    Scenario::load(&p).unwrap()
-}
-
 /// Simulates and runs the default pipeline: (track stream, truth), as written.
 fn simulate_and_run(s: &Scenario) -> (Vec<u8>, Vec<u8>) {
-    let (mut capture, mut truth) = (Vec::new(), Vec::new());
-    fuse1090::sim::simulate(s, &mut capture, &mut truth).unwrap();
+    let (capture, truth) = common::simulate(s);
     (run_in_memory(&capture, &Config::default().core).unwrap(), truth)
 }
 

@@ -9,24 +9,14 @@ mod common;
 use std::path::PathBuf;
 use std::process::Command;
 
+use common::{scenario, simulate};
 use fuse1090::cmd::run::run_capture;
 use fuse1090::config::Config;
 use fuse1090::eval::{evaluate, Truth};
 use fuse1090::sim::scenario::Scenario;
-use fuse1090::sim::simulate;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn sim_bytes(s: &Scenario) -> (Vec<u8>, Vec<u8>) {
-    let (mut cap, mut truth) = (Vec::new(), Vec::new());
-    simulate(s, &mut cap, &mut truth).unwrap();
-    (cap, truth)
-}
-
-fn scenario(name: &str) -> Scenario {
-    Scenario::load(&root().join(format!("fixtures/scenarios/{name}.toml"))).unwrap()
 }
 
 fn tmp(name: &str) -> tempfile::TempDir {
@@ -39,7 +29,7 @@ const COMMITTED: [&str; 3] = ["fusion-8seg-1hz", "fusion-8seg", "surface"];
 fn simulator_is_deterministic_and_committed_captures_are_current() {
     for name in COMMITTED {
         let s = scenario(name);
-        let (cap, truth) = sim_bytes(&s);
+        let (cap, truth) = simulate(&s);
         let dir = root().join("fixtures/captures").join(name);
         assert!(
             cap == std::fs::read(dir.join("capture.txt")).unwrap(),
@@ -49,10 +39,10 @@ fn simulator_is_deterministic_and_committed_captures_are_current() {
             truth == std::fs::read(dir.join("truth.jsonl")).unwrap(),
             "{name}: truth differs; regenerate it"
         );
-        assert_eq!(sim_bytes(&s), (cap.clone(), truth), "{name}: a second run differs");
+        assert_eq!(simulate(&s), (cap.clone(), truth), "{name}: a second run differs");
         let mut other = s.clone();
         other.seed += 1;
-        assert_ne!(sim_bytes(&other).0, cap, "{name}: the seed changes nothing");
+        assert_ne!(simulate(&other).0, cap, "{name}: the seed changes nothing");
     }
 }
 
@@ -239,7 +229,7 @@ fn two_threads_write_the_same_bytes_as_one() {
     // exercise every command.
     let mut s = scenario("fusion-8seg-1hz");
     s.aircraft[0].spoof_offset_m = Some([0.0, 300.0]);
-    let (capture, _) = sim_bytes(&s);
+    let (capture, _) = simulate(&s);
     let work = tmp("two-threads");
     let dir = work.path();
     std::fs::write(dir.join("capture.txt"), &capture).unwrap();
@@ -293,7 +283,7 @@ start = { lat = 47.2, lon = 8.1, alt_m = 10000.0, speed_mps = 200.0, heading_deg
 segments = [{ duration_s = 300.0 }]
 "#;
     let s = Scenario::parse(text, "rough").unwrap();
-    let (cap, truth_bytes) = sim_bytes(&s);
+    let (cap, truth_bytes) = simulate(&s);
     let truth_text = String::from_utf8(truth_bytes.clone()).unwrap();
     assert!(truth_text.lines().any(|l| l.contains("\"id\":\"rough\"")
         && l.contains("\"sigma_ns\":30")

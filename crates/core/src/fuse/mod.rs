@@ -429,7 +429,7 @@ impl Fuser {
         let mut seen: Vec<conflict::Seen> = Vec::with_capacity(self.aircraft.len());
         for (&addr, a) in &self.aircraft {
             // Airborne traffic only: surface movements are not TCAS encounters.
-            if !a.fused.confirmed() || now - a.fused.last_position_t > self.tcfg.coast_after_s || a.surface {
+            if !a.fused.confirmed() || a.fused.coasting_at(now, self.tcfg.coast_after_s) || a.surface {
                 continue;
             }
             let Some(k) = a.fused.kinematics() else {

@@ -87,7 +87,7 @@ impl Fuser {
         // positions is published however poor they are (an honest NACp 1).
         let limit = self.tcfg.publish_sigma_m;
         let lost = |track: &Track, est: &Option<Estimate>| {
-            est.is_some_and(|e| t - track.last_position_t > coast && e.largest_sigma_m() > limit)
+            est.is_some_and(|e| track.coasting_at(t, coast) && e.largest_sigma_m() > limit)
         };
         let (fused_lost, adsb_lost, mlat_lost) = (
             lost(&a.fused, &fused),

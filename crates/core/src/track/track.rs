@@ -223,6 +223,11 @@ impl Track {
         self.state.imm.is_some()
     }
 
+    /// Coasting at `t`: no position (a fix, ADS-B) for longer than `after_s`.
+    pub fn coasting_at(&self, t: f64, after_s: f64) -> bool {
+        t - self.last_position_t > after_s
+    }
+
     /// Applies a measurement in its time order.
     pub fn apply(&mut self, m: Measurement) -> Outcome {
         let oldest = self.history.front().map_or(f64::NEG_INFINITY, |(h, _)| h.t);
